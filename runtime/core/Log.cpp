@@ -1,0 +1,44 @@
+#include "runtime/core/Log.h"
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+
+namespace qgi {
+
+namespace {
+std::atomic<LogLevel> gLevel{LogLevel::Info}; // process-wide output filter, not engine state
+std::mutex gWriteMutex;
+
+const char* prefix(LogLevel level) {
+    switch (level) {
+    case LogLevel::Debug: return "qgi: debug: ";
+    case LogLevel::Info: return "qgi: ";
+    case LogLevel::Warning: return "qgi: warning: ";
+    case LogLevel::Error: return "qgi: error: ";
+    case LogLevel::Quiet: break;
+    }
+    return "qgi: ";
+}
+} // namespace
+
+void setLogLevel(LogLevel level) { gLevel.store(level); }
+LogLevel logLevel() { return gLevel.load(std::memory_order_relaxed); }
+
+void logMessage(LogLevel level, const std::string& message) {
+    if (level < logLevel()) return;
+    std::lock_guard lock(gWriteMutex);
+    std::fprintf(stderr, "%s%s\n", prefix(level), message.c_str());
+    std::fflush(stderr);
+}
+
+[[noreturn]] void assertFailed(const char* expression, const char* file, int line,
+                               const std::string& message) {
+    std::fprintf(stderr, "qgi: assertion failed: %s at %s:%d%s%s\n", expression, file, line,
+                 message.empty() ? "" : ": ", message.c_str());
+    std::fflush(stderr);
+    std::abort();
+}
+
+} // namespace qgi

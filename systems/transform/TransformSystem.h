@@ -1,0 +1,26 @@
+#pragma once
+
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+
+#include <glm/mat4x4.hpp>
+
+namespace qgi {
+
+struct Transform;
+
+/// Local TRS matrix of a Transform.
+glm::mat4 localMatrix(const Transform& t);
+
+/** Resolves the node hierarchy into world matrices.
+ *  Only entities whose Transform (or an ancestor's) changed this frame are recomputed, and
+ *  their WorldTransform is patched only when the matrix actually changes, so
+ *  `registry.changed<WorldTransform>()` is exactly the set of entities that moved.
+ *  Reads:  const Transform (and its change list)
+ *  Writes: WorldTransform (emplaced when missing)                                          */
+class TransformSystem {
+public:
+    void update(Registry& registry, const FrameContext& frame);
+};
+
+} // namespace qgi
