@@ -25,7 +25,7 @@ template <typename... Ts> class View;
 ///    no, it asserts. Collect the entities first and change them after the loop.
 ///
 /// Change tracking: `emplace` and `patch` record the entity in that type's changed list, which
-/// `clearChanges()` (called by the Schedule at the start of every frame) empties. A system asks
+/// `clearChanges()` (called by the Schedule at the end of every frame) empties. A system asks
 /// `changed<Transform>()` to learn which poses changed this frame. Writes through a plain
 /// reference are not tracked: use `patch` when the change matters to other systems.
 class Registry {
@@ -120,6 +120,7 @@ public:
     }
 
     /// Entities whose T was added or patched since the last clearChanges(), in order of change.
+    /// An entity destroyed (or whose T was removed) after its change may still be listed.
     template <typename T> std::span<const Entity> changed() const {
         const auto* p = findPool<T>();
         return p ? p->changed() : std::span<const Entity>{};

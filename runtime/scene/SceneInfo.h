@@ -1,0 +1,38 @@
+#pragma once
+
+#include <glm/vec3.hpp>
+
+#include <limits>
+#include <string>
+
+namespace qgi {
+
+/// Axis-aligned box, metres.
+struct Aabb {
+    glm::vec3 min{std::numeric_limits<float>::max()};
+    glm::vec3 max{-std::numeric_limits<float>::max()};
+
+    bool empty() const { return min.x > max.x || min.y > max.y || min.z > max.z; }
+    void extend(const glm::vec3& p) {
+        min = glm::min(min, p);
+        max = glm::max(max, p);
+    }
+    void extend(const Aabb& b) {
+        if (b.empty()) return;
+        extend(b.min);
+        extend(b.max);
+    }
+    glm::vec3 center() const { return 0.5f * (min + max); }
+    glm::vec3 extent() const { return max - min; }
+};
+
+/// World resource describing the loaded scene as a whole.
+struct SceneInfo {
+    std::string name;           ///< built-in name or the glTF file's stem
+    std::string source;         ///< "builtin:<name>" or the path it was loaded from
+    Aabb bounds;                ///< world bounds of every mesh at load time (mobiles at rest)
+    glm::vec3 environment{0.f}; ///< radiance of the sky seen by rays that leave, W/(m^2 sr)
+    float maxEdgeLength = 0.f;  ///< metres: the refinement bound the meshes were processed with
+};
+
+} // namespace qgi

@@ -1,0 +1,276 @@
+#include "runtime/core/Error.h"
+#include "runtime/ecs/Schedule.h"
+#include "runtime/profile/FrameProfiler.h"
+
+#include "components/PathFollower.h"
+#include "components/Transform.h"
+#include "components/WorldTransform.h"
+#include "systems/animation/AnimationSystem.h"
+#include "systems/transform/TransformSystem.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+namespace qgi {
+namespace {
+
+std::filesystem::path scratch(const std::string& name) {
+    const auto dir = std::filesystem::temp_directory_path() / "qgi_test_schedule";
+    std::filesystem::create_directories(dir);
+    return dir / name;
+}
+
+TEST(Schedule, RunsPhasesThenEntriesInDeclaredOrder) {
+    Schedule s;
+    std::vector<std::string> log;
+    // Phases are declared first; entries are added out of phase order on purpose.
+    s.addPhase("input").addPhase("transform").addPhase("render");
+    s.add("render", "draw", [&](Registry&, const FrameContext&) { log.push_back("draw"); });
+    s.add("input", "keys", [&](Registry&, const FrameContext&) { log.push_back("keys"); });
+    s.add("transform", "transform", [&](Registry&, const FrameContext&) { log.push_back("transform"); });
+    s.add("input", "mouse", [&](Registry&, const FrameContext&) { log.push_back("mouse"); });
+    Registry r;
+    s.run(r, FrameContext{});
+    EXPECT_EQ(log, (std::vector<std::string>{"keys", "mouse", "transform", "draw"}));
+    std::vector<std::string> names;
+    for (const auto* e : s.entries()) names.push_back(e->name);
+    EXPECT_EQ(names, (std::vector<std::string>{"input.keys", "input.mouse", "transform", "render.draw"}));
+}
+
+TEST(Schedule, PassesTheFrameContextThrough) {
+    Schedule s;
+    s.addPhase("p");
+    FrameContext seen;
+    s.add("p", "e", [&](Registry&, const FrameContext& f) { seen = f; });
+    Registry r;
+    s.run(r, FrameContext{41, 2.5, 0.25f, 1234});
+    EXPECT_EQ(seen.frameIndex, 41u);
+    EXPECT_DOUBLE_EQ(seen.time, 2.5);
+    EXPECT_FLOAT_EQ(seen.dt, 0.25f);
+    EXPECT_EQ(seen.seed, 1234u);
+}
+
+TEST(Schedule, RejectsUnknownPhasesAndDuplicates) {
+    Schedule s;
+    s.addPhase("a");
+    auto noop = [](Registry&, const FrameContext&) {};
+    EXPECT_THROW(s.add("b", "x", noop), Error);
+    s.add("a", "x", noop);
+    EXPECT_THROW(s.add("a", "x", noop), Error);
+    EXPECT_THROW(s.addPhase("a"), Error);
+}
+
+TEST(Schedule, DisabledEntriesDoNotRun) {
+    Schedule s;
+    s.addPhase("a");
+    int runs = 0;
+    s.add("a", "x", [&](Registry&, const FrameContext&) { ++runs; });
+    EXPECT_TRUE(s.setEnabled("a.x", false));
+    EXPECT_FALSE(s.setEnabled("a.nope", false));
+    Registry r;
+    s.run(r, FrameContext{});
+    EXPECT_EQ(runs, 0);
+}
+
+TEST(Schedule, ChangesAreVisibleLaterInTheFrameAndClearedAfter) {
+    Registry r;
+    const Entity e = r.create();
+    r.emplace<Transform>(e);
+    r.emplace<PathFollower>(e, PathFollower{{{0.f, glm::vec3(0.f)}, {1.f, glm::vec3(1.f, 0.f, 0.f)}}, false});
+    Schedule s;
+    s.addPhase("animation").addPhase("transform").addPhase("check");
+    AnimationSystem animation;
+    TransformSystem transforms;
+    s.add("animation", "animation", [&](Registry& reg, const FrameContext& f) { animation.update(reg, f); });
+    s.add("transform", "transform", [&](Registry& reg, const FrameContext& f) { transforms.update(reg, f); });
+    std::size_t movedSeen = 0;
+    s.add("check", "check", [&](Registry& reg, const FrameContext&) { movedSeen = reg.changed<WorldTransform>().size(); });
+
+    s.run(r, FrameContext{0, 0.5, 0.5f, 0});
+    EXPECT_EQ(movedSeen, 1u);
+    EXPECT_FLOAT_EQ(r.get<WorldTransform>(e).matrix[3].x, 0.5f);
+    EXPECT_TRUE(r.changed<Transform>().empty()); // cleared at the end of the frame
+
+    // Past the end of a non-looping path the pose holds: nothing moves any more.
+    s.run(r, FrameContext{1, 2.0, 1.5f, 0});
+    EXPECT_EQ(movedSeen, 1u);
+    s.run(r, FrameContext{2, 3.0, 1.0f, 0});
+    EXPECT_EQ(movedSeen, 0u);
+    EXPECT_FLOAT_EQ(r.get<WorldTransform>(e).matrix[3].x, 1.f);
+}
+
+TEST(Transform, ChildFollowsItsParent) {
+    Registry r;
+    const Entity parent = r.create();
+    const Entity child = r.create();
+    r.emplace<Transform>(parent, Transform{glm::vec3(1.f, 0.f, 0.f)});
+    Transform local;
+    local.translation = glm::vec3(0.f, 2.f, 0.f);
+    local.parent = parent;
+    r.emplace<Transform>(child, local);
+    TransformSystem system;
+    system.update(r, FrameContext{});
+    EXPECT_EQ(glm::vec3(r.get<WorldTransform>(child).matrix[3]), glm::vec3(1.f, 2.f, 0.f));
+    r.clearChanges();
+    // Rotating the parent by 90 degrees about Z carries the child to (-2 + 1, 0, 0).
+    r.patch<Transform>(parent).rotation = glm::angleAxis(glm::half_pi<float>(), glm::vec3(0, 0, 1));
+    system.update(r, FrameContext{});
+    const glm::vec3 p = r.get<WorldTransform>(child).matrix[3];
+    EXPECT_NEAR(p.x, -1.f, 1e-6f);
+    EXPECT_NEAR(p.y, 0.f, 1e-6f);
+    EXPECT_TRUE(r.wasChanged<WorldTransform>(child));
+}
+
+TEST(Profiler, TimesEveryScheduleEntry) {
+    Registry r;
+    auto& profiler = r.ctx().emplace<FrameProfiler>();
+    Schedule s;
+    s.addPhase("work");
+    s.add("work", "sleep", [](Registry&, const FrameContext&) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    });
+    s.add("work", "nothing", [](Registry&, const FrameContext&) {});
+    for (std::uint64_t f = 0; f < 5; ++f) s.run(r, FrameContext{f, 0.0, 0.f, 0});
+    ASSERT_EQ(profiler.frameCount(), 5u);
+    for (std::size_t f = 0; f < 5; ++f) {
+        // A sleep lasts at least what was asked; the entry's time cannot be shorter.
+        EXPECT_GE(profiler.sampleMs(f, "work.sleep"), 2.0);
+        EXPECT_GE(profiler.sampleMs(f, "work.nothing"), 0.0);
+        EXPECT_LT(profiler.sampleMs(f, "work.nothing"), profiler.sampleMs(f, "work.sleep"));
+    }
+    const auto stats = profiler.statistics();
+    ASSERT_EQ(stats.size(), 3u); // frame, work.sleep, work.nothing
+    EXPECT_EQ(stats[0].name, "frame");
+    EXPECT_EQ(stats[1].name, "work.sleep");
+    EXPECT_EQ(stats[1].count, 5u);
+    EXPECT_GE(stats[1].mean, 2.0);
+    EXPECT_LE(stats[1].p50, stats[1].p95);
+    EXPECT_LE(stats[1].p95, stats[1].p99);
+    EXPECT_LE(stats[1].p99, stats[1].max);
+    EXPECT_GE(stats[0].mean, stats[1].mean); // a frame contains its entries
+}
+
+TEST(Profiler, PercentilesUseNearestRank) {
+    FrameProfiler p;
+    for (std::uint64_t f = 0; f < 100; ++f) {
+        p.beginFrame(f);
+        p.recordSample("x", f, -1.0, double(f + 1), FrameProfiler::Track::Gpu); // 1..100 ms
+        p.endFrame();
+    }
+    const auto stats = p.statistics();
+    const auto& x = stats[1];
+    EXPECT_EQ(x.name, "x");
+    EXPECT_DOUBLE_EQ(x.mean, 50.5);
+    EXPECT_DOUBLE_EQ(x.p50, 50.0);
+    EXPECT_DOUBLE_EQ(x.p95, 95.0);
+    EXPECT_DOUBLE_EQ(x.p99, 99.0);
+    EXPECT_DOUBLE_EQ(x.max, 100.0);
+}
+
+TEST(Profiler, LateGpuSamplesLandInTheirFrame) {
+    FrameProfiler p;
+    for (std::uint64_t f = 0; f < 4; ++f) {
+        p.beginFrame(f);
+        p.endFrame();
+    }
+    p.recordSample("gpu.draw", 1, -1.0, 3.0, FrameProfiler::Track::Gpu);
+    EXPECT_DOUBLE_EQ(p.sampleMs(1, "gpu.draw"), 3.0);
+    EXPECT_LT(p.sampleMs(2, "gpu.draw"), 0.0);
+    p.recordSample("gpu.draw", 99, -1.0, 3.0, FrameProfiler::Track::Gpu); // unknown frame: dropped
+    EXPECT_EQ(p.statistics()[1].count, 1u);
+}
+
+TEST(Profiler, NestedScopesGetQualifiedNames) {
+    FrameProfiler p;
+    p.beginFrame(0);
+    {
+        FrameProfiler::Scope outer(&p, "render");
+        FrameProfiler::Scope inner(&p, "shadows");
+    }
+    p.endFrame();
+    EXPECT_GE(p.sampleMs(0, "render/shadows"), 0.0);
+    EXPECT_GE(p.sampleMs(0, "render"), p.sampleMs(0, "render/shadows"));
+}
+
+TEST(Profiler, ChromeTraceIsValidJsonWithOneEventPerSample) {
+    FrameProfiler p;
+    for (std::uint64_t f = 0; f < 3; ++f) {
+        p.beginFrame(f);
+        { FrameProfiler::Scope s(&p, "a \"quoted\" name"); }
+        p.recordSample("gpu", f, -1.0, 1.0, FrameProfiler::Track::Gpu);
+        p.endFrame();
+    }
+    const auto path = scratch("trace.json");
+    p.writeChromeTrace(path);
+    std::ifstream in(path);
+    const auto json = nlohmann::json::parse(in); // throws on invalid JSON
+    const auto& events = json.at("traceEvents");
+    int complete = 0, gpu = 0;
+    for (const auto& e : events) {
+        if (e.at("ph") == "X") {
+            ++complete;
+            EXPECT_GE(e.at("dur").get<double>(), 0.0);
+            EXPECT_TRUE(e.contains("ts"));
+            if (e.at("tid") == 2) ++gpu;
+        }
+    }
+    EXPECT_EQ(complete, 3 * 3); // per frame: the frame itself, the CPU scope, the GPU sample
+    EXPECT_EQ(gpu, 3);
+}
+
+TEST(Profiler, CsvHasOneRowPerFrameAndOneColumnPerEntry) {
+    FrameProfiler p;
+    for (std::uint64_t f = 0; f < 4; ++f) {
+        p.beginFrame(f);
+        { FrameProfiler::Scope s(&p, "always"); }
+        if (f % 2 == 0) {
+            FrameProfiler::Scope s(&p, "sometimes");
+        }
+        p.endFrame();
+    }
+    const auto path = scratch("profile.csv");
+    p.writeCsv(path);
+    std::ifstream in(path);
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line, "frame,frame_ms,always_ms,sometimes_ms");
+    int rows = 0;
+    while (std::getline(in, line)) {
+        std::vector<std::string> cells;
+        std::stringstream ss(line);
+        std::string cell;
+        while (std::getline(ss, cell, ',')) cells.push_back(cell);
+        if (line.back() == ',') cells.emplace_back();
+        ASSERT_EQ(cells.size(), 4u) << line;
+        EXPECT_EQ(std::stoi(cells[0]), rows);
+        EXPECT_GE(std::stod(cells[1]), std::stod(cells[2]));
+        EXPECT_EQ(cells[3].empty(), rows % 2 == 1); // empty where the entry did not run
+        ++rows;
+    }
+    EXPECT_EQ(rows, 4);
+}
+
+TEST(Profiler, SummaryTableListsEveryEntry) {
+    FrameProfiler p;
+    p.beginFrame(0);
+    { FrameProfiler::Scope s(&p, "photon.update"); }
+    p.endFrame();
+    const std::string table = p.summaryTable();
+    EXPECT_NE(table.find("p95 ms"), std::string::npos);
+    EXPECT_NE(table.find("photon.update"), std::string::npos);
+    EXPECT_NE(table.find("frame"), std::string::npos);
+}
+
+TEST(Profiler, UnwritablePathThrows) {
+    FrameProfiler p;
+    EXPECT_THROW(p.writeCsv("/nonexistent-dir/x.csv"), Error);
+    EXPECT_THROW(p.writeChromeTrace("/nonexistent-dir/x.json"), Error);
+}
+
+} // namespace
+} // namespace qgi
