@@ -33,6 +33,13 @@ public:
         return (slot != kAbsent && mDense[slot] == e) ? slot : kAbsent;
     }
 
+    /// Like find, but first tries `hint`: pools filled in the same entity order line up, and
+    /// a view walking one of them then finds the others' slots without a sparse lookup.
+    std::uint32_t findWithHint(Entity e, std::size_t hint) const {
+        if (hint < mDense.size() && mDense[hint] == e) return std::uint32_t(hint);
+        return find(e);
+    }
+
     // ---- change tracking ---------------------------------------------------------------------
     /// Entities whose component was added or patched since the last clearChanged().
     std::span<const Entity> changed() const { return mChanged; }

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <array>
+#include <cstring>
+#include <span>
 #include <tuple>
 #include <type_traits>
 
@@ -27,12 +29,19 @@ public:
         const PoolBase& lead = leadPool();
         Lock lock(*this);
         const auto entities = lead.entities();
-        for (std::size_t i = 0; i < entities.size(); ++i) {
-            const Entity e = entities[i];
-            std::array<std::uint32_t, sizeof...(Ts)> slots;
-            if (!findAll(e, slots)) continue;
-            invoke(fn, e, slots, std::index_sequence_for<Ts...>{});
+        const std::size_t n = entities.size();
+        std::size_t i = 0;
+        // Pools filled in the same entity order line up block by block: such a block is walked
+        // like plain arrays, with no per-entity lookup.
+        for (; i + kBlock <= n; i += kBlock) {
+            if (alignedBlock(entities, i)) {
+                for (std::size_t j = i; j < i + kBlock; ++j)
+                    invokeAt(fn, entities[j], j, std::index_sequence_for<Ts...>{});
+                continue;
+            }
+            for (std::size_t j = i; j < i + kBlock; ++j) visit(fn, lead, entities, j);
         }
+        for (; i < n; ++i) visit(fn, lead, entities, i);
     }
 
     /// The matching entities, in iteration order (a snapshot: safe to change structure after).
@@ -48,7 +57,7 @@ public:
     bool contains(Entity e) const {
         if (empty()) return false;
         std::array<std::uint32_t, sizeof...(Ts)> slots;
-        return findAll(e, slots);
+        return findAll(e, nullptr, PoolBase::kAbsent, slots);
     }
 
     template <typename T> T& get(Entity e) const {
@@ -60,6 +69,34 @@ public:
     }
 
 private:
+    static constexpr std::size_t kBlock = 64;
+
+    template <typename Fn>
+    void visit(Fn& fn, const PoolBase& lead, std::span<const Entity> entities, std::size_t i) const {
+        std::array<std::uint32_t, sizeof...(Ts)> slots;
+        if (findAll(entities[i], &lead, i, slots))
+            invoke(fn, entities[i], slots, std::index_sequence_for<Ts...>{});
+    }
+
+    bool alignedBlock(std::span<const Entity> lead, std::size_t begin) const {
+        return std::apply(
+            [&](auto*... p) {
+                return ((p->size() >= begin + kBlock &&
+                         std::memcmp(p->entities().data() + begin, lead.data() + begin,
+                                     kBlock * sizeof(Entity)) == 0) &&
+                        ...);
+            },
+            mPools);
+    }
+
+    template <typename Fn, std::size_t... I>
+    void invokeAt(Fn& fn, Entity e, std::size_t slot, std::index_sequence<I...>) const {
+        if constexpr (std::is_invocable_v<Fn&, Entity, Ts&...>)
+            fn(e, std::get<I>(mPools)->atSlot(std::uint32_t(slot))...);
+        else
+            fn(std::get<I>(mPools)->atSlot(std::uint32_t(slot))...);
+    }
+
     struct Lock {
         const View& view;
         explicit Lock(const View& v) : view(v) {
@@ -84,13 +121,20 @@ private:
         return *best;
     }
 
-    bool findAll(Entity e, std::array<std::uint32_t, sizeof...(Ts)>& slots) const {
-        return findAllImpl(e, slots, std::index_sequence_for<Ts...>{});
+    // `lead`: the pool being walked (nullptr: none), where e sits at `hint`.
+    bool findAll(Entity e, const PoolBase* lead, std::size_t hint,
+                 std::array<std::uint32_t, sizeof...(Ts)>& slots) const {
+        return findAllImpl(e, lead, hint, slots, std::index_sequence_for<Ts...>{});
     }
     template <std::size_t... I>
-    bool findAllImpl(Entity e, std::array<std::uint32_t, sizeof...(Ts)>& slots,
+    bool findAllImpl(Entity e, const PoolBase* lead, std::size_t hint,
+                     std::array<std::uint32_t, sizeof...(Ts)>& slots,
                      std::index_sequence<I...>) const {
-        return ((slots[I] = std::get<I>(mPools)->find(e), slots[I] != PoolBase::kAbsent) && ...);
+        return ((slots[I] = static_cast<const PoolBase*>(std::get<I>(mPools)) == lead
+                                ? std::uint32_t(hint)
+                                : std::get<I>(mPools)->findWithHint(e, hint),
+                 slots[I] != PoolBase::kAbsent) &&
+                ...);
     }
 
     template <typename Fn, std::size_t... I>

@@ -89,6 +89,28 @@ TEST(Ecs, ViewVisitsExactlyTheIntersection) {
     EXPECT_EQ(seen, expected);
 }
 
+TEST(Ecs, ViewOverAlignedAndMisalignedPoolsVisitsEachMatchOnce) {
+    // Pools filled in the same order are walked block-wise; removals break the alignment of
+    // some blocks, which then fall back to per-entity lookups. Both must agree.
+    Registry r;
+    std::vector<Entity> es;
+    for (int i = 0; i < 1000; ++i) {
+        es.push_back(r.create());
+        r.emplace<Position>(es.back(), float(i));
+        r.emplace<Velocity>(es.back(), float(i));
+    }
+    for (int i = 100; i < 1000; i += 7) r.remove<Velocity>(es[std::size_t(i)]);
+    std::vector<int> visits(1000, 0);
+    r.view<const Position, const Velocity>().each([&](Entity e, const Position& p, const Velocity& v) {
+        EXPECT_FLOAT_EQ(p.x, v.v);
+        ++visits[e.index];
+    });
+    for (int i = 0; i < 1000; ++i) {
+        const bool removed = i >= 100 && (i - 100) % 7 == 0;
+        EXPECT_EQ(visits[std::size_t(i)], removed ? 0 : 1) << i;
+    }
+}
+
 TEST(Ecs, ViewWritesThroughMutableComponents) {
     Registry r;
     for (int i = 0; i < 5; ++i) {
