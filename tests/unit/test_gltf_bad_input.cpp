@@ -1,0 +1,203 @@
+// Hostile glTF input: every file in tests/data/gltf/bad (one mutation of a valid triangle
+// each, see make_corpus.py there) must give one qgi::Error line naming the file and the field,
+// and leave the registry empty.
+
+#include "runtime/scene/GltfImporter.h"
+#include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneLoader.h"
+#include "runtime/scene/TextureLibrary.h"
+
+#include "components/Mesh.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+#include <string>
+
+namespace qgi {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kData = fs::path(QGI_TEST_DATA_DIR) / "gltf";
+const SceneOptions kNoRefinement{.maxEdgeLength = 1000.f};
+
+struct BadCase {
+    const char* file;
+    const char* field; ///< the field path the message must name ("" for the file as a whole)
+    const char* what;  ///< a word of the explanation
+};
+
+const BadCase kCases[] = {
+    {"missing_buffer_file.gltf", "buffers[0].uri", "not found"},
+    {"truncated.gltf", "JSON", "parse error"},
+    {"invalid_json.gltf", "JSON", "parse error"},
+    {"empty.gltf", "", "empty"},
+    {"accessor_out_of_range.gltf", "meshes[0].primitives[0].attributes.POSITION", "out of range"},
+    {"bufferview_out_of_range.gltf", "accessors[0].bufferView", "out of range"},
+    {"bufferview_past_buffer.gltf", "bufferViews[1].byteLength", "past the end"},
+    {"accessor_past_view.gltf", "accessors[0].count", "do not fit"},
+    {"bad_component_type.gltf", "accessors[0].componentType", "DOUBLE"},
+    {"index_out_of_range.gltf", "meshes[0].primitives[0].indices", "vertex count"},
+    {"non_triangle.gltf", "meshes[0].primitives[0].mode", "LINES"},
+    {"nan_position.gltf", "meshes[0].primitives[0].attributes.POSITION", "not finite"},
+    {"inf_position.gltf", "meshes[0].primitives[0].attributes.POSITION", "not finite"},
+    {"node_cycle.gltf", "nodes[1].children", "cycle"},
+    {"two_parents.gltf", "nodes[1].children[0]", "already has parent"},
+    {"bad_scene_node.gltf", "scenes[0].nodes[1]", "out of range"},
+    {"bad_material.gltf", "meshes[0].primitives[0].material", "out of range"},
+    {"uri_escape.gltf", "buffers[0].uri", "leaves the scene's folder"},
+    {"uri_escape_encoded.gltf", "buffers[0].uri", "leaves the scene's folder"},
+    {"uri_absolute.gltf", "buffers[0].uri", "absolute"},
+    {"bad_base64.gltf", "buffers[0].uri", "invalid base64"},
+    {"unknown_mobility.gltf", "nodes[0].extras.mobility", "'flying'"},
+    {"sheared_matrix.gltf", "nodes[0].matrix", "shear"},
+    {"unsupported_required_extension.gltf", "extensionsRequired[0]", "not supported"},
+    {"corrupt_image.gltf", "images[0]", "image"},
+    {"bad_glb_magic.glb", "header.magic", "glTF"},
+    {"bad_glb_length.glb", "header.length", "bytes declared"},
+};
+
+void PrintTo(const BadCase& c, std::ostream* out) {
+    *out << c.file;
+}
+
+/// Imports `path` expecting failure; returns the message after checking the registry is empty.
+std::string importFailure(const fs::path& path, const SceneOptions& options = kNoRefinement) {
+    Registry registry;
+    std::string message;
+    try {
+        importGltf(registry, path, options);
+        ADD_FAILURE() << path << " was accepted";
+    } catch (const Error& e) {
+        message = e.what();
+    }
+    EXPECT_EQ(registry.aliveCount(), 0u) << path;
+    EXPECT_FALSE(registry.ctx().contains<SceneInfo>()) << path;
+    EXPECT_FALSE(registry.ctx().contains<TextureLibrary>()) << path;
+    EXPECT_EQ(message.find('\n'), std::string::npos) << "not one line: " << message;
+    return message;
+}
+
+class GltfBadInput : public ::testing::TestWithParam<BadCase> {};
+
+TEST_P(GltfBadInput, FailsWithOneLineNamingFileAndField) {
+    const BadCase& c = GetParam();
+    const std::string message = importFailure(kData / "bad" / c.file);
+    // "<file>: <field>: <what>", or "<file>: <what>" for the file as a whole.
+    const std::string prefix = std::string(c.file) + ": " + c.field;
+    EXPECT_EQ(message.rfind(prefix, 0), 0u) << message;
+    EXPECT_NE(message.find(c.what), std::string::npos) << message;
+}
+
+INSTANTIATE_TEST_SUITE_P(Corpus, GltfBadInput, ::testing::ValuesIn(kCases),
+                         [](const ::testing::TestParamInfo<BadCase>& test) {
+                             std::string name = test.param.file;
+                             for (char& ch : name)
+                                 if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+                             return name;
+                         });
+
+TEST(GltfBadInput, EveryCorpusFileHasACase) {
+    std::set<std::string> files, cases;
+    for (const auto& entry : fs::directory_iterator(kData / "bad"))
+        files.insert(entry.path().filename().string());
+    for (const BadCase& c : kCases)
+        cases.insert(c.file);
+    EXPECT_EQ(files, cases);
+}
+
+fs::path scratchFile(const std::string& name) {
+    const fs::path dir = fs::path(::testing::TempDir()) / "qgi_gltf_bad_input";
+    fs::create_directories(dir);
+    return dir / name;
+}
+
+/// The single-triangle scene of triangle.gltf, with `extras` on its node.
+std::string triangleWithExtras(const std::string& extras) {
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string anchor = R"("name": "Triangle",)";
+    const std::size_t at = text.find(anchor);
+    EXPECT_NE(at, std::string::npos);
+    return text.insert(at + anchor.size(), R"("extras": )" + extras + ",");
+}
+
+TEST(GltfBadInput, DeepNestingIsRefusedBeforeParsing) {
+    // 10000 nested arrays overflow tinygltf's recursive parser; the importer must not hand
+    // them over. The scene sits in the good folder's copy so the external .bin resolves.
+    const fs::path deep = scratchFile("deep.gltf");
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                  fs::copy_options::overwrite_existing);
+    std::ofstream(deep) << triangleWithExtras(std::string(10000, '[') + std::string(10000, ']'));
+    const std::string message = importFailure(deep);
+    EXPECT_EQ(message.rfind("deep.gltf: JSON: nesting depth 10003", 0), 0u) << message;
+
+    // Exactly at the limit is fine: root object, "nodes" array and node object are 3 levels.
+    const fs::path limit = scratchFile("limit.gltf");
+    const int arrays = kGltfMaxJsonDepth - 3;
+    std::ofstream(limit) << triangleWithExtras(std::string(std::size_t(arrays), '[') +
+                                               std::string(std::size_t(arrays), ']'));
+    Registry registry;
+    importGltf(registry, limit, kNoRefinement);
+    EXPECT_EQ(registry.count<Mesh>(), 1u);
+}
+
+TEST(GltfBadInput, RandomCorruptionsFailCleanly) {
+    // Seeded corruptions of every good file (a few random bytes, sometimes truncation): each
+    // import either succeeds or throws qgi::Error and leaves the registry empty. A crash or any
+    // other exception fails; the sanitizer build (QGI_SANITIZE) also catches memory errors.
+    std::mt19937 random(2024);
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                  fs::copy_options::overwrite_existing);
+    for (const char* name : {"triangle.gltf", "hierarchy.gltf", "lights.gltf", "box.glb"}) {
+        std::ifstream in(kData / "good" / name, std::ios::binary);
+        const std::string original((std::istreambuf_iterator<char>(in)),
+                                   std::istreambuf_iterator<char>());
+        int failures = 0;
+        for (int trial = 0; trial < 300; ++trial) {
+            std::string bytes = original;
+            for (std::uint32_t edits = 1 + random() % 4; edits > 0; --edits)
+                bytes[random() % bytes.size()] = char(random() % 256);
+            if (random() % 8 == 0) bytes.resize(random() % bytes.size());
+            const fs::path path = scratchFile(name);
+            std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+            Registry registry;
+            try {
+                importGltf(registry, path, kNoRefinement);
+            } catch (const Error& e) {
+                ++failures;
+                EXPECT_EQ(registry.aliveCount(), 0u) << e.what();
+                EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+            }
+        }
+        EXPECT_GT(failures, 0) << name; // the corruptions do reach the checks
+    }
+}
+
+TEST(GltfBadInput, MissingFileAndUnknownExtensionNameThePath) {
+    EXPECT_EQ(importFailure(scratchFile("absent.gltf")).rfind("absent.gltf: cannot read", 0), 0u);
+    EXPECT_EQ(
+        importFailure(kData / "good" / "triangle.bin").rfind("triangle.bin: unknown extension", 0),
+        0u);
+}
+
+TEST(GltfBadInput, FailureWhileProcessingMeshesLeavesTheRegistryEmpty) {
+    // A 1 um edge bound would refine the triangle into ~10^12 pieces: processMesh refuses,
+    // after everything else in the file has been read.
+    const std::string message =
+        importFailure(kData / "good" / "triangle.gltf", SceneOptions{.maxEdgeLength = 1e-6f});
+    EXPECT_EQ(message.rfind("triangle.gltf: meshes[0].primitives[0]: ", 0), 0u) << message;
+}
+
+TEST(GltfBadInput, NegativeEdgeBoundIsRefused) {
+    const std::string message =
+        importFailure(kData / "good" / "triangle.gltf", SceneOptions{.maxEdgeLength = -1.f});
+    EXPECT_NE(message.find("maxEdgeLength"), std::string::npos) << message;
+}
+
+} // namespace
+} // namespace qgi
