@@ -1,1 +1,23 @@
-int main() { return 0; }
+// qgi-demo: a walkthrough of a quasi-static scene. All lighting lives in systems/; this
+// program only parses the command line, loads the scene and runs the frame schedule.
+#include "demo/DemoApp.h"
+#include "demo/DemoOptions.h"
+
+#include "runtime/core/Error.h"
+
+#include <cstdio>
+#include <exception>
+
+int main(int argc, char** argv) {
+    const auto parsed = qgi::demo::parseDemoOptions(argc, argv);
+    if (parsed.exitCode) return *parsed.exitCode;
+    try {
+        return qgi::demo::runDemo(parsed.options);
+    } catch (const qgi::Error& e) {
+        std::fprintf(stderr, "qgi-demo: error: %s\n", e.what());
+        return 1;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "qgi-demo: internal error: %s\n", e.what());
+        return 3;
+    }
+}

@@ -1,0 +1,133 @@
+#include "demo/DemoApp.h"
+
+#include "components/Camera.h"
+#include "components/PathFollower.h"
+#include "demo/CameraPath.h"
+#include "demo/FlyController.h"
+#include "runtime/core/Log.h"
+#include "runtime/profile/FrameProfiler.h"
+#include "runtime/render/GlWindow.h"
+#include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneLoader.h"
+#include "systems/frame/FrameSchedule.h"
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+namespace qgi::demo {
+
+namespace {
+
+Entity findActiveCamera(Registry& registry) {
+    Entity found{};
+    registry.view<const Camera>().each([&](Entity e, const Camera& c) {
+        if (c.active || !found) found = e;
+    });
+    return found;
+}
+
+void applyCameraPath(Registry& registry, const std::string& choice) {
+    const Entity camera = findActiveCamera(registry);
+    if (!camera) fail("scene has no camera");
+    if (choice == "scene") return;
+    if (choice == "none") {
+        registry.remove<PathFollower>(camera);
+        return;
+    }
+    registry.emplaceOrReplace<PathFollower>(camera, loadCameraPath(choice));
+}
+
+void ensureParentDirectory(const std::filesystem::path& base) {
+    if (base.has_parent_path()) std::filesystem::create_directories(base.parent_path());
+}
+
+} // namespace
+
+int runDemo(const DemoOptions& options) {
+    if (options.quiet) setLogLevel(LogLevel::Warning);
+
+    // The window comes first: without a GL 4.5 context there is nothing to show, and the user
+    // should learn that before a long scene load.
+    WindowSettings windowSettings;
+    windowSettings.width = options.width;
+    windowSettings.height = options.height;
+    windowSettings.headless = options.headless;
+    windowSettings.title = "qgi - " + options.scene;
+    GlWindow window(windowSettings);
+
+    Registry world;
+    FrameProfiler& profiler = world.ctx().emplace<FrameProfiler>();
+    const auto loadStart = std::chrono::steady_clock::now();
+    {
+        FrameProfiler::Scope scope(&profiler, "load.scene");
+        loadScene(world, options.scene, SceneOptions{options.maxEdgeLength});
+    }
+    applyCameraPath(world, options.cameraPath);
+    if (options.exportScene) {
+        ensureParentDirectory(*options.exportScene);
+        exportGltf(world, *options.exportScene);
+        logInfo("wrote ", *options.exportScene);
+    }
+
+    FrameSettings frameSettings;
+    RenderSettings& render = *frameSettings.render;
+    render.width = window.width();
+    render.height = window.height();
+    render.mode = options.mode == "photon" ? ShadingMode::Photon : ShadingMode::Hybrid;
+    render.exposure = options.exposure;
+    FrameSchedule frame(world, frameSettings);
+    FlyController controller(window.handle());
+    if (!options.headless)
+        frame.schedule().add("input", "input", [&](Registry& r, const FrameContext& f) {
+            controller.update(r, f);
+        });
+
+    const double loadSeconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - loadStart).count();
+    const auto& info = world.ctx().get<SceneInfo>();
+    logInfo("scene '", info.name, "' ready in ", loadSeconds, " s: ", world.aliveCount(),
+            " entities, mesh edge bound ", info.maxEdgeLength, " m");
+
+    FrameContext context;
+    context.seed = options.seed;
+    auto last = std::chrono::steady_clock::now();
+    for (std::uint64_t f = 0; options.frames == 0 || f < std::uint64_t(options.frames); ++f) {
+        window.pollEvents();
+        if (window.shouldClose()) break;
+        if (!options.headless && glfwGetKey(window.handle(), GLFW_KEY_ESCAPE) == GLFW_PRESS) break;
+
+        const auto now = std::chrono::steady_clock::now();
+        const double realDt = std::chrono::duration<double>(now - last).count();
+        last = now;
+        context.dt = f == 0 ? 0.f : float(options.headless ? options.dt : realDt);
+        context.time += context.dt;
+        context.frameIndex = f;
+
+        const bool lastFrame = options.frames != 0 && f + 1 == std::uint64_t(options.frames);
+        const bool f12 = !options.headless && glfwGetKey(window.handle(), GLFW_KEY_F12) == GLFW_PRESS;
+        if (options.screenshot && (lastFrame || f12)) {
+            ensureParentDirectory(*options.screenshot);
+            frame.renderer()->requestScreenshot(*options.screenshot);
+        }
+        frame.run(world, context);
+        window.swapBuffers();
+        if (options.headless && !options.quiet && (f + 1) % 60 == 0)
+            logInfo("frame ", f + 1, "/", options.frames);
+    }
+
+    if (options.screenshot) logInfo("wrote ", *options.screenshot, ".exr and .png");
+    if (options.profile) {
+        ensureParentDirectory(*options.profile);
+        profiler.writeChromeTrace(*options.profile + ".json");
+        profiler.writeCsv(*options.profile + ".csv");
+        logInfo("wrote ", *options.profile, ".json and .csv");
+    }
+    if (!options.quiet) std::printf("\n%s", profiler.summaryTable().c_str());
+    return 0;
+}
+
+} // namespace qgi::demo

@@ -1,0 +1,36 @@
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+namespace qgi::demo {
+
+/// Everything the command line sets. Defaults are what a first run should show.
+struct DemoOptions {
+    std::string scene = "atrium"; ///< built-in name or .gltf/.glb path
+    bool headless = false;        ///< hidden window, scripted camera, fixed time step
+    int frames = 0;               ///< frames to run; 0: until the window closes (headless: 240)
+    int width = 1280;
+    int height = 720;
+    std::string cameraPath = "scene"; ///< "scene" (the scene's own path), "none", or a CSV file
+    std::string mode = "hybrid";      ///< "photon" or "hybrid"
+    float exposure = 1.f;             ///< multiplier on HDR radiance before tonemapping
+    float maxEdgeLength = 0.f;        ///< mesh refinement bound in metres; 0: scene default
+    double dt = 1.0 / 30.0;           ///< seconds per frame in headless runs
+    std::uint64_t seed = 1;
+    std::optional<std::string> screenshot; ///< base path: writes .exr and .png after the last frame
+    std::optional<std::string> profile;    ///< base path: writes .json (trace) and .csv
+    std::optional<std::string> exportScene; ///< .gltf or .glb path, written after loading
+    bool quiet = false;
+};
+
+/// Parses argv. Returns the options, or an exit code when the program should stop now
+/// (`--help` gives 0, a bad option 2 with a one-line message on stderr).
+struct ParseResult {
+    DemoOptions options;
+    std::optional<int> exitCode;
+};
+ParseResult parseDemoOptions(int argc, char** argv);
+
+} // namespace qgi::demo

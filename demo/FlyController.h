@@ -1,0 +1,36 @@
+#pragma once
+
+#include "components/PathFollower.h"
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+
+#include <optional>
+
+struct GLFWwindow;
+
+namespace qgi::demo {
+
+/** Interactive input: a fly camera (WASD + right-mouse look, Q/E down/up, Shift faster) and
+ *  keyboard moves of the selected mobile (Tab selects, arrows and PageUp/PageDown move).
+ *  Taking the camera stops its scripted path; C gives it back.
+ *  Reads:  GLFW key and mouse state
+ *  Writes: Transform of the active camera and of the selected mobile (patched)           */
+class FlyController {
+public:
+    explicit FlyController(GLFWwindow* window) : mWindow(window) {}
+    void update(Registry& registry, const FrameContext& frame);
+
+private:
+    void selectNextMobile(Registry& registry);
+
+    GLFWwindow* mWindow;
+    Entity mSelectedMobile{};
+    bool mLooking = false;
+    double mLastX = 0, mLastY = 0;
+    float mYaw = 0.f, mPitch = 0.f; ///< radians
+    bool mTabDown = false, mCDown = false;
+    bool mCameraTaken = false;
+    std::optional<PathFollower> mStashedPath; ///< the camera's script while the player flies
+};
+
+} // namespace qgi::demo

@@ -1,0 +1,15 @@
+#pragma once
+
+#include "runtime/render/GlHandle.h"
+
+#include <cstdint>
+#include <span>
+
+namespace qgi {
+
+/// An 8-bit RGBA colour texture with a full mip chain, trilinear filtering and repeat wrapping.
+/// Rows are uploaded top row first, so glTF texture coordinates (origin top left) sample it
+/// unflipped. `srgb`: the texels are sRGB-encoded and read back linear in the shader.
+GlTexture createColorTexture(int width, int height, std::span<const std::uint8_t> rgba, bool srgb);
+
+} // namespace qgi

@@ -1,0 +1,69 @@
+#pragma once
+
+#include <epoxy/gl.h>
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+#include <array>
+#include <cstdint>
+#include <span>
+
+namespace qgi {
+
+struct GpuMesh;
+
+/// Where a surface's irradiance (besides the renderer's direct light) comes from.
+enum class SurfaceLighting : std::uint8_t {
+    None,               ///< no indirect light known: 0
+    VertexIrradiance,   ///< per-vertex irradiance buffer of the GpuMesh, Gouraud-interpolated
+    SphericalHarmonics, ///< `sh` evaluated per pixel at the shading normal (avatars)
+};
+
+/// One mesh to draw this frame. Per-frame data: the pointers live until the frame is drawn.
+struct DrawItem {
+    const GpuMesh* mesh = nullptr;
+    glm::mat4 model{1.f};        ///< object to world
+    glm::vec3 albedo{0.8f};      ///< diffuse albedo, linear RGB
+    glm::vec3 emission{0.f};     ///< emitted radiance, W/(m^2 sr)
+    GLuint baseColorTexture = 0; ///< multiplies albedo; 0: none
+    SurfaceLighting lighting = SurfaceLighting::None;
+    /// May move every frame (mobiles, avatars): shadow maps keep the static casters' depth
+    /// and redraw only these over it.
+    bool movable = false;
+    std::array<glm::vec3, 9> sh{}; ///< radiance SH (ShLighting order) for SphericalHarmonics
+};
+
+enum class LightType : std::uint8_t { Point, Spot, Directional };
+
+/// A light in world space, as the renderer shades it in hybrid mode.
+struct RenderLight {
+    LightType type = LightType::Point;
+    glm::vec3 position{0.f};             ///< metres (point, spot)
+    glm::vec3 direction{0.f, 0.f, -1.f}; ///< unit: spot axis, or where directional light travels
+    glm::vec3 radiance{1.f};    ///< W/sr (point, spot: colour * intensity) or W/m^2 (directional)
+    float innerConeAngle = 0.f; ///< spot, radians, half angle
+    float outerConeAngle = 0.7853982f; ///< spot, radians, half angle, at most pi/2
+
+    friend bool operator==(const RenderLight&, const RenderLight&) = default;
+};
+
+struct RenderCamera {
+    glm::mat4 view{1.f};
+    glm::mat4 projection{1.f};
+    glm::vec3 position{0.f}; ///< metres, world
+};
+
+/// Everything SceneRenderer draws in one frame.
+struct RenderScene {
+    RenderCamera camera;
+    std::span<const DrawItem> items;
+    std::span<const RenderLight> lights;
+    /// Since the previous frame a caster that is not movable moved, appeared or disappeared:
+    /// every shadow map is redrawn (as when the lights change).
+    bool staticCastersChanged = true;
+    /// Since the previous frame a movable caster moved, appeared or disappeared: the shadow
+    /// maps that see one, now or before, are refreshed.
+    bool movableCastersChanged = true;
+};
+
+} // namespace qgi

@@ -1,0 +1,255 @@
+#include "runtime/render/SceneRenderer.h"
+
+#include "runtime/core/Log.h"
+#include "runtime/render/GpuMesh.h"
+#include "runtime/render/GpuTexture.h"
+#include "runtime/render/PipelineState.h"
+#include "runtime/render/ShaderInterface.h"
+#include "runtime/render/ShaderLoader.h"
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+#include <glm/gtc/matrix_inverse.hpp>
+#include <glm/gtc/type_ptr.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <string_view>
+
+namespace qgi {
+namespace {
+
+using namespace shader;
+
+// std140 mirror of LightBlock in shaders/common/lighting.glsl.
+struct GpuLight {
+    glm::vec4 position;
+    glm::vec4 direction;
+    glm::vec4 radiance;
+    glm::vec4 spot;
+    glm::ivec4 kind;
+};
+struct GpuLightBlock {
+    glm::mat4 shadowMatrices[kMaxShadowLayers];
+    glm::ivec4 count;
+    GpuLight lights[kMaxLights];
+};
+static_assert(sizeof(GpuLight) == 80);
+static_assert(offsetof(GpuLightBlock, count) == 64 * kMaxShadowLayers);
+static_assert(offsetof(GpuLightBlock, lights) % 16 == 0);
+
+RenderSettings validated(const RenderSettings& s) {
+    GLint maxSize = 0;
+    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
+    if (s.width <= 0 || s.height <= 0 || s.width > maxSize || s.height > maxSize)
+        fail("render setting width x height = ", s.width, "x", s.height, " is outside 1..",
+             maxSize);
+    if (!std::isfinite(s.exposure) || s.exposure <= 0.f)
+        fail("render setting exposure = ", s.exposure, " must be a positive multiplier");
+    if (s.shadowMapSize < 16 || s.shadowMapSize > maxSize)
+        fail("render setting shadowMapSize = ", s.shadowMapSize, " is outside 16..", maxSize);
+    return s;
+}
+
+constexpr std::array<std::uint8_t, 4> kWhite{255, 255, 255, 255};
+
+/// The scene shader compiles the direct-light code only in hybrid mode: llvmpipe would pay
+/// for it even behind a uniform that is false.
+std::string modeDefine(ShadingMode mode) {
+    return mode == ShadingMode::Hybrid ? "#define HYBRID\n" : "";
+}
+
+bool cpuTiming(PassTiming timing) {
+    if (timing != PassTiming::Auto) return timing == PassTiming::Cpu;
+    const auto* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+    return renderer && std::string_view(renderer).find("llvmpipe") != std::string_view::npos;
+}
+
+GlTexture createTarget(GLenum format, int width, int height) {
+    GlTexture texture = createTexture(GL_TEXTURE_2D);
+    glTextureStorage2D(texture.id(), 1, format, width, height);
+    glTextureParameteri(texture.id(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(texture.id(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    return texture;
+}
+
+GlFramebuffer createFramebufferFor(const GlTexture& color, const GlTexture* depth) {
+    GlFramebuffer framebuffer = createFramebuffer();
+    glNamedFramebufferTexture(framebuffer.id(), GL_COLOR_ATTACHMENT0, color.id(), 0);
+    if (depth) glNamedFramebufferTexture(framebuffer.id(), GL_DEPTH_ATTACHMENT, depth->id(), 0);
+    glNamedFramebufferDrawBuffer(framebuffer.id(), GL_COLOR_ATTACHMENT0);
+    glNamedFramebufferReadBuffer(framebuffer.id(), GL_COLOR_ATTACHMENT0);
+    const GLenum status = glCheckNamedFramebufferStatus(framebuffer.id(), GL_FRAMEBUFFER);
+    if (status != GL_FRAMEBUFFER_COMPLETE)
+        fail("render target incomplete (GL status 0x", std::hex, status, ")");
+    return framebuffer;
+}
+
+/// Reads a whole RGBA texture, rows flipped so the top row comes first.
+template <typename T>
+std::vector<T> readTexture(GLuint texture, int width, int height, GLenum type) {
+    const std::size_t row = std::size_t(width) * 4;
+    std::vector<T> bottomUp(row * std::size_t(height));
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+    glPixelStorei(GL_PACK_SKIP_ROWS, 0);
+    glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+    glGetTextureImage(texture, 0, GL_RGBA, type, GLsizei(bottomUp.size() * sizeof(T)),
+                      bottomUp.data());
+    std::vector<T> topDown(bottomUp.size());
+    for (int y = 0; y < height; ++y)
+        std::memcpy(&topDown[std::size_t(y) * row], &bottomUp[std::size_t(height - 1 - y) * row],
+                    row * sizeof(T));
+    return topDown;
+}
+
+} // namespace
+
+SceneRenderer::SceneRenderer(const RenderSettings& settings)
+    : mSettings(validated(settings)), mTimer(cpuTiming(settings.passTiming)),
+      mDefines(shaderInterfaceDefines()),
+      mSceneProgram(
+          loadProgram({"scene.vert", "scene.frag"}, mDefines + modeDefine(settings.mode))),
+      mTonemapProgram(loadProgram({"fullscreen.vert", "tonemap.frag"}, mDefines)),
+      mShadows(settings.shadowMapSize, mDefines),
+      mHdrColor(createTarget(GL_RGBA32F, settings.width, settings.height)),
+      mDepth(createTarget(GL_DEPTH_COMPONENT32F, settings.width, settings.height)),
+      mHdrTarget(createFramebufferFor(mHdrColor, &mDepth)),
+      mLdrColor(createTarget(GL_RGBA8, settings.width, settings.height)),
+      mLdrTarget(createFramebufferFor(mLdrColor, nullptr)), mLightBlock(createBuffer()),
+      mWhite(createColorTexture(1, 1, kWhite, false)), mNoVertices(createVertexArray()) {
+    glNamedBufferStorage(mLightBlock.id(), sizeof(GpuLightBlock), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    if (mTimer.cpuTimed()) logInfo("render passes are timed on the CPU around glFinish");
+}
+
+void SceneRenderer::setExposure(float exposure) {
+    QGI_ASSERT(std::isfinite(exposure) && exposure > 0.f, "exposure ", exposure);
+    mSettings.exposure = exposure;
+}
+
+void SceneRenderer::render(const RenderScene& scene, FrameProfiler* profiler,
+                           std::uint64_t frameIndex) {
+    mTimer.beginFrame(profiler, frameIndex);
+    std::span<const RenderLight> lights = scene.lights;
+    if (lights.size() > std::size_t(kMaxLights)) {
+        if (!mWarnedLightLimit)
+            logWarning(lights.size(), " lights: only the first ", kMaxLights, " are drawn");
+        mWarnedLightLimit = true;
+        lights = lights.first(kMaxLights);
+    }
+    if (mSettings.mode == ShadingMode::Photon)
+        lights = {}; // all light is in the per-vertex irradiance
+    else
+        mShadows.update(lights, scene.items, scene.staticCastersChanged,
+                        scene.movableCastersChanged, mTimer);
+    uploadLights(lights);
+    {
+        PassTimer::Scope pass(mTimer, "render/scene");
+        drawScene(scene);
+    }
+    PassTimer::Scope pass(mTimer, "render/tonemap");
+    tonemapAndPresent();
+}
+
+void SceneRenderer::uploadLights(std::span<const RenderLight> lights) {
+    GpuLightBlock block;
+    const std::span<const glm::mat4> matrices = mShadows.matrices();
+    std::copy(matrices.begin(), matrices.end(), block.shadowMatrices);
+    block.count = glm::ivec4(int(lights.size()), 0, 0, 0);
+    const std::span<const LightShadow> shadows = mShadows.shadows();
+    for (std::size_t i = 0; i < lights.size(); ++i) {
+        const RenderLight& light = lights[i];
+        const LightShadow shadow = i < shadows.size() ? shadows[i] : LightShadow{};
+        const float cosInner = std::cos(light.innerConeAngle);
+        const float cosOuter = std::cos(light.outerConeAngle);
+        const float coneScale = 1.f / std::max(1e-3f, cosInner - cosOuter);
+        block.lights[i] = GpuLight{
+            glm::vec4(light.position, shadow.texelScale),
+            glm::vec4(light.direction, 0.f),
+            glm::vec4(light.radiance, 0.f),
+            glm::vec4(coneScale, -cosOuter * coneScale, 0.f, 0.f),
+            glm::ivec4(int(light.type), shadow.faces, shadow.layer, 0),
+        };
+    }
+    glNamedBufferSubData(
+        mLightBlock.id(), 0,
+        GLsizeiptr(offsetof(GpuLightBlock, lights) + lights.size() * sizeof(GpuLight)), &block);
+}
+
+void SceneRenderer::drawScene(const RenderScene& scene) {
+    PipelineState state;
+    state.framebuffer = mHdrTarget.id();
+    state.viewportWidth = mSettings.width;
+    state.viewportHeight = mSettings.height;
+    applyState(state);
+    const float black[4] = {0.f, 0.f, 0.f, 1.f};
+    const float farDepth = 1.f;
+    glClearNamedFramebufferfv(mHdrTarget.id(), GL_COLOR, 0, black);
+    glClearNamedFramebufferfv(mHdrTarget.id(), GL_DEPTH, 0, &farDepth);
+
+    const GLuint program = mSceneProgram.id();
+    glUseProgram(program);
+    const glm::mat4 viewProjection = scene.camera.projection * scene.camera.view;
+    glProgramUniformMatrix4fv(program, kViewProjection, 1, GL_FALSE,
+                              glm::value_ptr(viewProjection));
+    glProgramUniform3fv(program, kCameraPosition, 1, glm::value_ptr(scene.camera.position));
+    glBindBufferBase(GL_UNIFORM_BUFFER, kLightBlockBinding, mLightBlock.id());
+    mShadows.bindTexture(kShadowUnit);
+
+    for (const DrawItem& item : scene.items) {
+        const glm::mat3 linear(item.model);
+        const glm::mat3 normalMatrix = glm::inverseTranspose(linear);
+        glProgramUniformMatrix4fv(program, kModel, 1, GL_FALSE, glm::value_ptr(item.model));
+        glProgramUniformMatrix3fv(program, kNormalMatrix, 1, GL_FALSE,
+                                  glm::value_ptr(normalMatrix));
+        glProgramUniform3fv(program, kAlbedo, 1, glm::value_ptr(item.albedo));
+        glProgramUniform3fv(program, kEmission, 1, glm::value_ptr(item.emission));
+        glProgramUniform1i(program, kLighting, int(item.lighting));
+        glProgramUniform1i(program, kMirrored, glm::determinant(linear) < 0.f);
+        if (item.lighting == SurfaceLighting::SphericalHarmonics)
+            glProgramUniform3fv(program, kSh, 9, glm::value_ptr(item.sh[0]));
+        glBindTextureUnit(kBaseColorUnit,
+                          item.baseColorTexture ? item.baseColorTexture : mWhite.id());
+        drawGpuMesh(*item.mesh);
+    }
+}
+
+void SceneRenderer::tonemapAndPresent() {
+    PipelineState state;
+    state.framebuffer = mLdrTarget.id();
+    state.viewportWidth = mSettings.width;
+    state.viewportHeight = mSettings.height;
+    state.depthTest = false;
+    state.depthWrite = false;
+    applyState(state);
+    glUseProgram(mTonemapProgram.id());
+    glProgramUniform1f(mTonemapProgram.id(), kExposure, mSettings.exposure);
+    glBindTextureUnit(kHdrUnit, mHdrColor.id());
+    glBindVertexArray(mNoVertices.id());
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+
+    // Present: scale the tonemapped image to the window's framebuffer.
+    GLFWwindow* window = glfwGetCurrentContext();
+    if (!window) return;
+    int width = 0, height = 0;
+    glfwGetFramebufferSize(window, &width, &height);
+    const bool sameSize = width == mSettings.width && height == mSettings.height;
+    glBlitNamedFramebuffer(mLdrTarget.id(), 0, 0, 0, mSettings.width, mSettings.height, 0, 0, width,
+                           height, GL_COLOR_BUFFER_BIT, sameSize ? GL_NEAREST : GL_LINEAR);
+}
+
+ImageF SceneRenderer::readHdr() const {
+    return {mSettings.width, mSettings.height,
+            readTexture<float>(mHdrColor.id(), mSettings.width, mSettings.height, GL_FLOAT)};
+}
+
+Image8 SceneRenderer::readLdr() const {
+    return {mSettings.width, mSettings.height,
+            readTexture<std::uint8_t>(mLdrColor.id(), mSettings.width, mSettings.height,
+                                      GL_UNSIGNED_BYTE)};
+}
+
+} // namespace qgi

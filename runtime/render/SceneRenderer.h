@@ -1,0 +1,61 @@
+#pragma once
+
+#include "runtime/io/Image8.h"
+#include "runtime/io/ImageF.h"
+#include "runtime/render/GlHandle.h"
+#include "runtime/render/PassTimer.h"
+#include "runtime/render/RenderScene.h"
+#include "runtime/render/RenderSettings.h"
+#include "runtime/render/ShadowMaps.h"
+
+#include <cstdint>
+
+namespace qgi {
+
+class FrameProfiler;
+
+/** Draws a RenderScene: shadow maps (hybrid mode), the scene into an RGBA32F target of
+ *  radiance in W/(m^2 sr), then exposure and the filmic tonemap (shaders/tonemap.frag) into an
+ *  sRGB-encoded RGBA8 target, which is blitted to the current window's framebuffer.
+ *  Every pass sets its full GL state (PipelineState); passes are timed as "render/shadow",
+ *  "render/scene" and "render/tonemap". Needs a current GL 4.5 context for its whole life.
+ *  Lights past shader::kMaxLights are ignored (logged once).                              */
+class SceneRenderer {
+public:
+    /// Throws qgi::Error naming the setting for bad settings, or for a shader that fails.
+    explicit SceneRenderer(const RenderSettings& settings);
+
+    void render(const RenderScene& scene, FrameProfiler* profiler, std::uint64_t frameIndex);
+
+    const RenderSettings& settings() const { return mSettings; }
+    void setExposure(float exposure); ///< a positive multiplier (RenderSettings::exposure)
+    bool cpuTimedPasses() const { return mTimer.cpuTimed(); }
+
+    /// The last frame's radiance, W/(m^2 sr) (alpha 1), top row first.
+    ImageF readHdr() const;
+    /// The last frame after tonemapping, sRGB-encoded (alpha 255), top row first.
+    Image8 readLdr() const;
+
+private:
+    void uploadLights(std::span<const RenderLight> lights);
+    void drawScene(const RenderScene& scene);
+    void tonemapAndPresent();
+
+    RenderSettings mSettings;
+    PassTimer mTimer;
+    std::string mDefines;
+    GlProgram mSceneProgram;
+    GlProgram mTonemapProgram;
+    ShadowMaps mShadows;
+    GlTexture mHdrColor;
+    GlTexture mDepth;
+    GlFramebuffer mHdrTarget;
+    GlTexture mLdrColor;
+    GlFramebuffer mLdrTarget;
+    GlBuffer mLightBlock;
+    GlTexture mWhite;          ///< bound where an item has no base colour texture
+    GlVertexArray mNoVertices; ///< the fullscreen triangle needs a vertex array, not data
+    bool mWarnedLightLimit = false;
+};
+
+} // namespace qgi

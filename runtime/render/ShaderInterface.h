@@ -1,0 +1,40 @@
+#pragma once
+
+#include <string>
+
+namespace qgi {
+
+/// Binding points, uniform locations and enum values the scene shaders share with the C++
+/// side. The shaders see them as macros (shaderInterfaceDefines), so this is the only copy.
+namespace shader {
+
+// Uniform locations (explicit, so no lookups by name; a mat4 takes 4, a mat3 3 locations).
+constexpr int kModel = 0;          // mat4
+constexpr int kNormalMatrix = 4;   // mat3
+constexpr int kViewProjection = 8; // mat4
+constexpr int kAlbedo = 12;
+constexpr int kEmission = 13;
+constexpr int kLighting = 14;
+constexpr int kMirrored = 15;
+constexpr int kSh = 16; // vec3[9]
+constexpr int kCameraPosition = 25;
+constexpr int kExposure = 26;
+
+// Texture units and buffer binding points.
+constexpr int kBaseColorUnit = 0;
+constexpr int kHdrUnit = 0;
+constexpr int kShadowUnit = 1;
+constexpr int kLightBlockBinding = 0;
+
+// Array sizes: lights in the light block; shadow layers (a point light takes 6, a spot or
+// directional light 1).
+constexpr int kMaxLights = 64;
+constexpr int kMaxShadowLayers = 32;
+
+} // namespace shader
+
+/// "#define NAME value" lines for every constant above and the enums of RenderScene.h, for
+/// loadProgram.
+std::string shaderInterfaceDefines();
+
+} // namespace qgi

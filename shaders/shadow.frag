@@ -1,0 +1,4 @@
+#version 450 core
+// Shadow pass: the depth buffer is the only output.
+
+void main() {}

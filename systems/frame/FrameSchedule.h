@@ -1,0 +1,44 @@
+#pragma once
+
+#include "runtime/ecs/Registry.h"
+#include "runtime/ecs/Schedule.h"
+#include "systems/animation/AnimationSystem.h"
+#include "systems/render/RenderSystem.h"
+#include "systems/transform/TransformSystem.h"
+
+#include <memory>
+#include <optional>
+
+namespace qgi {
+
+struct FrameSettings {
+    /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
+    std::optional<RenderSettings> render = RenderSettings{};
+};
+
+/** The frame, in one place: owns the systems and lists them in the order they run.
+ *
+ *    input             (added by the application: player input)
+ *    animation         scripted paths move cameras, mobiles, avatars, lights
+ *    transform         world matrices; WorldTransform patched only where a pose changed
+ *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
+ *    render            uploads dirty ranges, draws, tonemaps
+ *
+ *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
+ *  unless the registry already holds them. Systems never call each other.               */
+class FrameSchedule {
+public:
+    FrameSchedule(Registry& registry, const FrameSettings& settings);
+
+    Schedule& schedule() { return mSchedule; }
+    void run(Registry& registry, const FrameContext& frame) { mSchedule.run(registry, frame); }
+    RenderSystem* renderer() { return mRender.get(); }
+
+private:
+    Schedule mSchedule;
+    AnimationSystem mAnimation;
+    TransformSystem mTransform;
+    std::unique_ptr<RenderSystem> mRender;
+};
+
+} // namespace qgi

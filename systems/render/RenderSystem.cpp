@@ -1,0 +1,233 @@
+#include "systems/render/RenderSystem.h"
+
+#include "components/Avatar.h"
+#include "components/Camera.h"
+#include "components/DirectionalLight.h"
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/Name.h"
+#include "components/PointLight.h"
+#include "components/ShLighting.h"
+#include "components/SpotLight.h"
+#include "components/VertexIrradiance.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Log.h"
+#include "runtime/io/Exr.h"
+#include "runtime/io/Png.h"
+#include "runtime/profile/FrameProfiler.h"
+#include "runtime/render/GpuTexture.h"
+#include "runtime/scene/TextureLibrary.h"
+#include "systems/render/GpuResources.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+
+#include <algorithm>
+
+namespace qgi {
+namespace {
+
+std::string describe(const Registry& registry, Entity e) {
+    const Name* name = registry.tryGet<Name>(e);
+    return str("entity ", e.index, ":", e.generation, name ? " '" + name->value + "'" : "");
+}
+
+/// Why a mesh cannot be drawn, or empty when it can.
+std::string meshProblem(const Mesh& mesh) {
+    const std::size_t n = mesh.positions.size();
+    if (n == 0 || mesh.indices.empty()) return "no triangles";
+    if (mesh.normals.size() != n) return str(mesh.normals.size(), " normals for ", n, " positions");
+    if (!mesh.uvs.empty() && mesh.uvs.size() != n)
+        return str(mesh.uvs.size(), " uvs for ", n, " positions");
+    if (mesh.indices.size() % 3 != 0) return str(mesh.indices.size(), " indices (not triangles)");
+    for (const std::uint32_t index : mesh.indices)
+        if (index >= n) return str("index ", index, " >= ", n, " positions");
+    return {};
+}
+
+glm::vec3 forwardOf(const glm::mat4& world) {
+    return glm::normalize(-glm::vec3(world[2]));
+}
+
+glm::vec3 worldCenter(const DrawItem& item) {
+    return glm::vec3(item.model * glm::vec4(item.mesh->bounds.center(), 1.f));
+}
+
+} // namespace
+
+RenderSystem::RenderSystem(const RenderSettings& settings) : mRenderer(settings) {}
+
+void RenderSystem::update(Registry& registry, const FrameContext& frame) {
+    GpuResources* gpu = registry.ctx().find<GpuResources>();
+    if (!gpu) gpu = &registry.ctx().emplace<GpuResources>();
+
+    RenderScene scene;
+    syncMeshes(registry, *gpu, scene);
+    collectLights(registry);
+    scene.lights = mLights;
+    if (findCamera(registry, scene.camera)) {
+        sortFrontToBack(scene.camera.position);
+        scene.items = mItems;
+    } else if (!mWarnedNoCamera) {
+        logWarning("no entity has Camera and WorldTransform: the frame stays black");
+        mWarnedNoCamera = true;
+    }
+    mRenderer.render(scene, registry.ctx().find<FrameProfiler>(), frame.frameIndex);
+
+    if (mScreenshot) {
+        writeScreenshot(*mScreenshot);
+        mScreenshot.reset();
+    }
+}
+
+void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene& scene) {
+    // Free what no longer has a mesh to draw. Whether it was movable is gone with it: count
+    // it as a static change.
+    mStale.clear();
+    for (const auto& [entity, mesh] : gpu.meshes)
+        if (!registry.alive(entity) || !registry.has<Mesh>(entity) ||
+            !registry.has<WorldTransform>(entity))
+            mStale.push_back(entity);
+    for (const Entity e : mStale)
+        gpu.meshes.erase(e);
+    scene.staticCastersChanged = !mStale.empty();
+    scene.movableCastersChanged = false;
+
+    mItems.clear();
+    registry.view<const Mesh, const WorldTransform>().each([&](Entity e, const Mesh& mesh,
+                                                               const WorldTransform& world) {
+        const auto [slot, created] = gpu.meshes.try_emplace(e);
+        GpuMesh& gpuMesh = slot->second;
+        VertexIrradiance* irradiance = registry.tryGet<VertexIrradiance>(e);
+        const bool movable = registry.has<MobileMesh>(e) || registry.has<Avatar>(e);
+        bool& casterChanged = movable ? scene.movableCastersChanged : scene.staticCastersChanged;
+        if (created || registry.wasChanged<Mesh>(e)) {
+            casterChanged = true;
+            if (const std::string problem = meshProblem(mesh); !problem.empty()) {
+                logWarning(describe(registry, e), ": mesh not drawn: ", problem);
+                gpuMesh = GpuMesh{};
+                return;
+            }
+            gpuMesh = createGpuMesh(mesh);
+            if (irradiance)
+                irradiance->dirty.push_back({0, std::uint32_t(irradiance->irradiance.size())});
+        }
+        if (!gpuMesh.vertexArray) return; // rejected until its Mesh changes
+        if (registry.wasChanged<WorldTransform>(e)) casterChanged = true;
+
+        DrawItem& item = mItems.emplace_back();
+        item.mesh = &gpuMesh;
+        item.model = world.matrix;
+        item.movable = movable;
+        const Material* material = registry.tryGet<Material>(e);
+        const Material m = material ? *material : Material{};
+        item.albedo = m.baseColor;
+        item.emission = m.emission;
+        item.baseColorTexture = baseColorTexture(registry, gpu, m.baseColorTexture);
+        if (irradiance && !irradiance->dirty.empty())
+            uploadIrradiance(gpuMesh, irradiance->irradiance, irradiance->dirty);
+        if (registry.has<Avatar>(e)) {
+            item.lighting = SurfaceLighting::SphericalHarmonics;
+            const ShLighting* sh = registry.tryGet<ShLighting>(e);
+            item.sh = sh ? sh->coefficients : std::array<glm::vec3, 9>{};
+        } else if (irradiance) {
+            item.lighting = SurfaceLighting::VertexIrradiance;
+        }
+    });
+}
+
+void RenderSystem::sortFrontToBack(const glm::vec3& eye) {
+    // Nearer meshes first: the depth test then rejects hidden fragments before shading them,
+    // which is most of the scene pass on a software rasterizer.
+    std::sort(mItems.begin(), mItems.end(), [&](const DrawItem& a, const DrawItem& b) {
+        const glm::vec3 da = worldCenter(a) - eye, db = worldCenter(b) - eye;
+        return glm::dot(da, da) < glm::dot(db, db);
+    });
+}
+
+GLuint RenderSystem::baseColorTexture(const Registry& registry, GpuResources& gpu, int index) {
+    if (index < 0) return 0;
+    const TextureLibrary* library = registry.ctx().find<TextureLibrary>();
+    const Image* image =
+        library && std::size_t(index) < library->images.size() ? &library->images[index] : nullptr;
+    const bool valid = image && image->width > 0 && image->height > 0 &&
+                       image->rgba.size() == std::size_t(image->width) * image->height * 4;
+    if (!valid) {
+        if (!mWarnedTexture)
+            logWarning("base colour texture ", index, " is missing or malformed: drawn without");
+        mWarnedTexture = true;
+        return 0;
+    }
+    if (gpu.textures.size() <= std::size_t(index)) gpu.textures.resize(std::size_t(index) + 1);
+    GlTexture& texture = gpu.textures[std::size_t(index)];
+    if (!texture)
+        texture = createColorTexture(image->width, image->height, image->rgba, image->srgb);
+    return texture.id();
+}
+
+void RenderSystem::collectLights(const Registry& registry) {
+    mLights.clear();
+    registry.view<const PointLight, const WorldTransform>().each(
+        [&](const PointLight& light, const WorldTransform& world) {
+            RenderLight& out = mLights.emplace_back();
+            out.type = LightType::Point;
+            out.position = glm::vec3(world.matrix[3]);
+            out.radiance = light.color * light.intensity;
+        });
+    registry.view<const SpotLight, const WorldTransform>().each(
+        [&](const SpotLight& light, const WorldTransform& world) {
+            RenderLight& out = mLights.emplace_back();
+            out.type = LightType::Spot;
+            out.position = glm::vec3(world.matrix[3]);
+            out.direction = forwardOf(world.matrix);
+            out.radiance = light.color * light.intensity;
+            out.innerConeAngle = light.innerConeAngle;
+            out.outerConeAngle = light.outerConeAngle;
+        });
+    registry.view<const DirectionalLight, const WorldTransform>().each(
+        [&](const DirectionalLight& light, const WorldTransform& world) {
+            RenderLight& out = mLights.emplace_back();
+            out.type = LightType::Directional;
+            out.direction = forwardOf(world.matrix);
+            out.radiance = light.color * light.irradiance;
+        });
+}
+
+bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) const {
+    const Camera* chosen = nullptr;
+    const WorldTransform* chosenWorld = nullptr;
+    registry.view<const Camera, const WorldTransform>().each(
+        [&](const Camera& c, const WorldTransform& world) {
+            if (!chosen || (c.active && !chosen->active)) {
+                chosen = &c;
+                chosenWorld = &world;
+            }
+        });
+    if (!chosen) return false;
+    const float aspect = float(settings().width) / float(settings().height);
+    camera.view = glm::inverse(chosenWorld->matrix);
+    camera.projection = glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar);
+    camera.position = glm::vec3(chosenWorld->matrix[3]);
+    return true;
+}
+
+void RenderSystem::requestScreenshot(const std::filesystem::path& base) {
+    const std::filesystem::path folder = base.parent_path();
+    if (!folder.empty() && !std::filesystem::is_directory(folder))
+        fail("screenshot folder '", folder.string(), "' does not exist");
+    mScreenshot = base;
+}
+
+void RenderSystem::writeScreenshot(const std::filesystem::path& base) const {
+    std::filesystem::path exr = base, png = base;
+    exr += ".exr";
+    png += ".png";
+    try {
+        writeExr(exr, readHdr());
+        writePng(png, readLdr());
+    } catch (const Error& e) {
+        logError("screenshot not written: ", e.what());
+    }
+}
+
+} // namespace qgi

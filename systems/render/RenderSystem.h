@@ -1,0 +1,71 @@
+#pragma once
+
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/io/Image8.h"
+#include "runtime/io/ImageF.h"
+#include "runtime/render/RenderScene.h"
+#include "runtime/render/RenderSettings.h"
+#include "runtime/render/SceneRenderer.h"
+
+#include <filesystem>
+#include <optional>
+#include <vector>
+
+namespace qgi {
+
+struct GpuResources;
+
+/** Draws the registry's scene from the active Camera (local -Z forward, Y up) with the
+ *  SceneRenderer: outgoing radiance = albedo / pi * E + emission, where E is the entity's
+ *  per-vertex irradiance (VertexIrradiance, else 0), or for avatars the irradiance of their
+ *  ShLighting at the shading normal; hybrid mode adds the direct light of point, spot and
+ *  directional lights with shadow maps. Albedo is Material::baseColor times the base colour
+ *  texture; entities without Material get Material{}. Both sides of every triangle are drawn.
+ *  Spot cones fall off as glTF KHR_lights_punctual suggests (see shaders/common/lighting.glsl).
+ *  Meshes reach the GPU lazily and are rebuilt when their Mesh is patched; only the dirty
+ *  ranges of VertexIrradiance are uploaded each frame. Shadow maps keep the depth of static
+ *  casters; MobileMesh and Avatar entities are redrawn over it in the maps that see them.
+ *  Reads:  const Camera, const WorldTransform, const Mesh, const Material, const MobileMesh,
+ *          const Avatar, const ShLighting, const PointLight, const SpotLight,
+ *          const DirectionalLight, const Name (logs), ctx<const TextureLibrary>,
+ *          ctx<FrameProfiler> (pass times)
+ *  Writes: VertexIrradiance::dirty (uploaded, then cleared), ctx<GpuResources>
+ *  Needs a current GL 4.5 context from construction to destruction.                      */
+class RenderSystem {
+public:
+    /// Throws qgi::Error for bad settings or a shader that does not compile.
+    explicit RenderSystem(const RenderSettings& settings);
+
+    void update(Registry& registry, const FrameContext& frame);
+
+    /// At the end of the next update, writes `base`.exr (the HDR radiance, float, linear) and
+    /// `base`.png (the tonemapped image). Throws qgi::Error now if base's folder does not
+    /// exist; a write that still fails is logged (the frame does not throw).
+    void requestScreenshot(const std::filesystem::path& base);
+
+    void setExposure(float exposure) { mRenderer.setExposure(exposure); }
+    const RenderSettings& settings() const { return mRenderer.settings(); }
+
+    /// The last frame: radiance W/(m^2 sr), and tonemapped sRGB; top row first.
+    ImageF readHdr() const { return mRenderer.readHdr(); }
+    Image8 readLdr() const { return mRenderer.readLdr(); }
+
+private:
+    void syncMeshes(Registry& registry, GpuResources& gpu, RenderScene& scene);
+    void collectLights(const Registry& registry);
+    bool findCamera(const Registry& registry, RenderCamera& camera) const;
+    void sortFrontToBack(const glm::vec3& eye);
+    GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
+    void writeScreenshot(const std::filesystem::path& base) const;
+
+    SceneRenderer mRenderer;
+    std::vector<DrawItem> mItems;
+    std::vector<RenderLight> mLights;
+    std::vector<Entity> mStale;
+    std::optional<std::filesystem::path> mScreenshot;
+    bool mWarnedNoCamera = false;
+    bool mWarnedTexture = false;
+};
+
+} // namespace qgi

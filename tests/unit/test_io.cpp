@@ -1,0 +1,231 @@
+// Round trips and failure modes of the image and mesh file writers (runtime/io).
+
+#include "runtime/core/Error.h"
+#include "runtime/io/Exr.h"
+#include "runtime/io/Ply.h"
+#include "runtime/io/Png.h"
+
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <random>
+
+namespace qgi {
+namespace {
+
+namespace fs = std::filesystem;
+
+class IoTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        mDir = fs::path(::testing::TempDir()) /
+               ("qgi_io_" +
+                std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+        fs::remove_all(mDir);
+        fs::create_directories(mDir);
+    }
+    void TearDown() override { fs::remove_all(mDir); }
+
+    fs::path mDir;
+    std::mt19937 mRandom{1234};
+};
+
+// Floats over many binades, with both signs: a lossless format must return every bit.
+std::vector<float> wideRangeFloats(std::mt19937& random, std::size_t count) {
+    std::uniform_real_distribution<float> mantissa(-1.f, 1.f);
+    std::uniform_int_distribution<int> exponent(-20, 20);
+    std::vector<float> values(count);
+    for (float& v : values)
+        v = std::ldexp(mantissa(random), exponent(random));
+    return values;
+}
+
+void writeText(const fs::path& path, const std::string& text) {
+    std::ofstream(path, std::ios::binary) << text;
+}
+
+// Expects a qgi::Error whose message names `path`.
+template <typename Fn> void expectErrorNaming(Fn&& fn, const fs::path& path) {
+    try {
+        fn();
+        ADD_FAILURE() << "no qgi::Error for " << path;
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+}
+
+TEST_F(IoTest, ExrFloatRgbaRoundTripIsExact) {
+    ImageF image{7, 5, wideRangeFloats(mRandom, 7 * 5 * 4)};
+    image.rgba[0] = std::numeric_limits<float>::infinity();
+    image.rgba[1] = 0.f;
+    image.rgba[2] = -0.f;
+    image.rgba[3] = std::numeric_limits<float>::denorm_min();
+    writeExr(mDir / "a.exr", image);
+    const ImageF back = readExr(mDir / "a.exr");
+    ASSERT_EQ(back.width, 7);
+    ASSERT_EQ(back.height, 5);
+    ASSERT_EQ(back.rgba.size(), image.rgba.size());
+    for (std::size_t i = 0; i < image.rgba.size(); ++i)
+        EXPECT_EQ(std::bit_cast<std::uint32_t>(back.rgba[i]),
+                  std::bit_cast<std::uint32_t>(image.rgba[i]))
+            << "value " << i;
+}
+
+TEST_F(IoTest, ExrRgbReadsBackWithOpaqueAlpha) {
+    const std::vector<float> rgb = wideRangeFloats(mRandom, 4 * 3 * 3);
+    writeExr(mDir / "rgb.exr", 4, 3, rgb, 3);
+    const ImageF back = readExr(mDir / "rgb.exr");
+    ASSERT_EQ(back.width * back.height, 12);
+    for (std::size_t p = 0; p < 12; ++p) {
+        for (std::size_t c = 0; c < 3; ++c)
+            EXPECT_EQ(back.rgba[4 * p + c], rgb[3 * p + c]);
+        EXPECT_EQ(back.rgba[4 * p + 3], 1.f);
+    }
+}
+
+TEST_F(IoTest, ExrHalfRoundsToNearestHalf) {
+    // Normal halves span 2^-14 .. 65504 and carry 11 significant bits, so rounding to nearest
+    // changes a value by at most 2^-11 of itself.
+    std::uniform_real_distribution<float> value(1e-3f, 6e4f);
+    ImageF image{16, 16, std::vector<float>(16 * 16 * 4)};
+    for (float& v : image.rgba)
+        v = value(mRandom);
+    writeExr(mDir / "h.exr", image, ExrPrecision::Half);
+    const ImageF back = readExr(mDir / "h.exr");
+    ASSERT_EQ(back.rgba.size(), image.rgba.size());
+    for (std::size_t i = 0; i < image.rgba.size(); ++i)
+        EXPECT_NEAR(back.rgba[i], image.rgba[i], image.rgba[i] * std::ldexp(1.f, -11));
+}
+
+TEST_F(IoTest, PngRoundTripIsExact) {
+    Image8 image{9, 4, std::vector<std::uint8_t>(9 * 4 * 4)};
+    std::uniform_int_distribution<int> byte(0, 255);
+    for (auto& b : image.rgba)
+        b = std::uint8_t(byte(mRandom));
+    writePng(mDir / "a.png", image);
+    const Image8 back = readPng(mDir / "a.png");
+    EXPECT_EQ(back.width, 9);
+    EXPECT_EQ(back.height, 4);
+    EXPECT_EQ(back.rgba, image.rgba);
+}
+
+PlyMesh randomPly(std::mt19937& random, std::size_t vertices, std::size_t faces) {
+    PlyMesh mesh;
+    const std::vector<float> values = wideRangeFloats(random, vertices * 9);
+    for (std::size_t i = 0; i < vertices; ++i) {
+        const float* v = &values[9 * i];
+        mesh.positions.push_back({v[0], v[1], v[2]});
+        mesh.normals.push_back({v[3], v[4], v[5]});
+        mesh.irradiance.push_back({v[6], v[7], v[8]});
+        mesh.mobile.push_back(std::uint8_t(i % 3 == 0));
+    }
+    std::uniform_int_distribution<std::uint32_t> index(0, std::uint32_t(vertices - 1));
+    for (std::size_t i = 0; i < faces * 3; ++i)
+        mesh.triangles.push_back(index(random));
+    return mesh;
+}
+
+void expectSame(const PlyMesh& a, const PlyMesh& b) {
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.normals, b.normals);
+    EXPECT_EQ(a.irradiance, b.irradiance);
+    EXPECT_EQ(a.mobile, b.mobile);
+    EXPECT_EQ(a.triangles, b.triangles);
+}
+
+TEST_F(IoTest, PlyBinaryAndAsciiRoundTripsAreExact) {
+    const PlyMesh mesh = randomPly(mRandom, 50, 20);
+    for (const PlyFormat format : {PlyFormat::BinaryLittleEndian, PlyFormat::Ascii}) {
+        const fs::path path = mDir / (format == PlyFormat::Ascii ? "a.ply" : "b.ply");
+        writePly(path, mesh, format);
+        expectSame(readPly(path), mesh);
+    }
+}
+
+TEST_F(IoTest, PlyWithoutFacesHasTheDocumentedHeader) {
+    const PlyMesh mesh = randomPly(mRandom, 3, 0);
+    writePly(mDir / "points.ply", mesh, PlyFormat::Ascii);
+    std::ifstream file(mDir / "points.ply");
+    std::string text((std::istreambuf_iterator<char>(file)), {});
+    EXPECT_TRUE(text.starts_with("ply\nformat ascii 1.0\n"));
+    EXPECT_NE(text.find("element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                        "property float nx\nproperty float ny\nproperty float nz\n"
+                        "property float er\nproperty float eg\nproperty float eb\n"
+                        "property uchar mobile\nend_header\n"),
+              std::string::npos);
+    EXPECT_EQ(text.find("element face"), std::string::npos);
+    expectSame(readPly(mDir / "points.ply"), mesh);
+}
+
+TEST_F(IoTest, WritesToAMissingFolderThrowNamingThePath) {
+    const fs::path missing = mDir / "no_such_folder";
+    const std::vector<float> rgba(4, 1.f);
+    const std::vector<std::uint8_t> bytes(4, 255);
+    const PlyMesh mesh = randomPly(mRandom, 3, 1);
+    expectErrorNaming([&] { writeExr(missing / "a.exr", 1, 1, rgba, 4); }, missing / "a.exr");
+    expectErrorNaming([&] { writePng(missing / "a.png", 1, 1, bytes); }, missing / "a.png");
+    expectErrorNaming([&] { writePly(missing / "a.ply", mesh); }, missing / "a.ply");
+}
+
+TEST_F(IoTest, ReadsOfMissingOrCorruptFilesThrowNamingThePath) {
+    for (const char* name : {"none.exr", "none.png", "none.ply"}) {
+        const fs::path path = mDir / name;
+        expectErrorNaming([&] { readExr(path); }, path);
+        expectErrorNaming([&] { readPng(path); }, path);
+        expectErrorNaming([&] { readPly(path); }, path);
+    }
+    const fs::path junk = mDir / "junk.bin";
+    writeText(junk, "this is not an image or a mesh");
+    expectErrorNaming([&] { readExr(junk); }, junk);
+    expectErrorNaming([&] { readPng(junk); }, junk);
+    expectErrorNaming([&] { readPly(junk); }, junk);
+}
+
+TEST_F(IoTest, MalformedPlyFilesThrow) {
+    const PlyMesh mesh = randomPly(mRandom, 4, 2);
+    const fs::path good = mDir / "good.ply";
+    writePly(good, mesh);
+    std::ifstream file(good, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(file)), {});
+
+    const fs::path bad = mDir / "bad.ply";
+    writeText(bad, text.substr(0, text.size() - 5)); // truncated data
+    expectErrorNaming([&] { readPly(bad); }, bad);
+
+    std::string wrongProperty = text;
+    wrongProperty.replace(wrongProperty.find("float er"), 8, "double e");
+    writeText(bad, wrongProperty);
+    expectErrorNaming([&] { readPly(bad); }, bad);
+
+    std::string hugeCount = text;
+    hugeCount.replace(hugeCount.find("vertex 4"), 8, "vertex 99999999999");
+    writeText(bad, hugeCount);
+    expectErrorNaming([&] { readPly(bad); }, bad);
+
+    PlyMesh outOfRange = mesh;
+    outOfRange.triangles[0] = 7; // only 4 vertices
+    expectErrorNaming([&] { writePly(bad, outOfRange); }, bad);
+    writePly(good, mesh, PlyFormat::Ascii);
+    std::ifstream asciiFile(good, std::ios::binary);
+    std::string ascii((std::istreambuf_iterator<char>(asciiFile)), {});
+    ascii[ascii.rfind('\n', ascii.size() - 2) + 1] = '4'; // last face: a quad, not a triangle
+    writeText(bad, ascii);
+    expectErrorNaming([&] { readPly(bad); }, bad);
+}
+
+TEST_F(IoTest, MismatchedSizesThrow) {
+    const std::vector<float> three(3, 0.f);
+    expectErrorNaming([&] { writeExr(mDir / "s.exr", 2, 2, three, 3); }, mDir / "s.exr");
+    expectErrorNaming([&] { writeExr(mDir / "s.exr", 1, 1, three, 2); }, mDir / "s.exr");
+    const std::vector<std::uint8_t> bytes(3, 0);
+    expectErrorNaming([&] { writePng(mDir / "s.png", 1, 1, bytes); }, mDir / "s.png");
+    PlyMesh mesh = randomPly(mRandom, 3, 1);
+    mesh.normals.pop_back();
+    expectErrorNaming([&] { writePly(mDir / "s.ply", mesh); }, mDir / "s.ply");
+}
+
+} // namespace
+} // namespace qgi
