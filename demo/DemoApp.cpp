@@ -5,6 +5,7 @@
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
+#include "runtime/scene/SceneQueries.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GlWindow.h"
 #include "runtime/scene/SceneInfo.h"
@@ -21,14 +22,6 @@
 namespace qgi::demo {
 
 namespace {
-
-Entity findActiveCamera(Registry& registry) {
-    Entity found{};
-    registry.view<const Camera>().each([&](Entity e, const Camera& c) {
-        if (c.active || !found) found = e;
-    });
-    return found;
-}
 
 void applyCameraPath(Registry& registry, const std::string& choice) {
     const Entity camera = findActiveCamera(registry);

@@ -6,6 +6,7 @@
 #include "components/PathFollower.h"
 #include "components/Transform.h"
 #include "runtime/core/Log.h"
+#include "runtime/scene/SceneQueries.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -17,14 +18,6 @@
 namespace qgi::demo {
 
 namespace {
-
-Entity activeCamera(Registry& registry) {
-    Entity found{};
-    registry.view<const Camera>().each([&](Entity e, const Camera& c) {
-        if (c.active || !found) found = e;
-    });
-    return found;
-}
 
 bool pressed(GLFWwindow* w, int key) { return glfwGetKey(w, key) == GLFW_PRESS; }
 
@@ -47,7 +40,7 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
     if (tab && !mTabDown) selectNextMobile(registry);
     mTabDown = tab;
 
-    const Entity camera = activeCamera(registry);
+    const Entity camera = findActiveCamera(registry);
     if (!camera || !registry.has<Transform>(camera)) return;
 
     const bool c = pressed(mWindow, GLFW_KEY_C);

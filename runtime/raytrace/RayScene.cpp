@@ -1,5 +1,6 @@
 #include "runtime/raytrace/RayScene.h"
 
+#include "runtime/core/Finite.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
@@ -29,16 +30,6 @@ std::string describe(const Registry& registry, Entity e, const char* kind) {
     std::string out = str("RayScene: ", kind, " entity ", e.index);
     if (const Name* name = registry.tryGet<Name>(e)) out += str(" '", name->value, "'");
     return out;
-}
-
-bool isFinite(const glm::vec3& v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-bool isFinite(const glm::mat4& m) {
-    for (int c = 0; c < 4; ++c)
-        if (!isFinite(glm::vec3(m[c])) || !std::isfinite(m[c][3])) return false;
-    return true;
 }
 
 bool isInvertible(const glm::mat4& m) {

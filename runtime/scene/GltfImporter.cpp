@@ -1,5 +1,6 @@
 #include "runtime/scene/GltfImporter.h"
 
+#include "runtime/core/Finite.h"
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
@@ -44,16 +45,6 @@ namespace fs = std::filesystem;
 static_assert(std::endian::native == std::endian::little, "glTF buffers are little endian");
 
 namespace {
-
-bool isFinite(const glm::vec3& v) {
-    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-bool isFinite(const glm::mat4& m) {
-    for (int c = 0; c < 4; ++c)
-        if (!isFinite(glm::vec3(m[c])) || !std::isfinite(m[c][3])) return false;
-    return true;
-}
 
 } // namespace
 

@@ -1,5 +1,6 @@
 #include "systems/render/RenderSystem.h"
 
+#include "runtime/scene/SceneQueries.h"
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
@@ -194,16 +195,10 @@ void RenderSystem::collectLights(const Registry& registry) {
 }
 
 bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) const {
-    const Camera* chosen = nullptr;
-    const WorldTransform* chosenWorld = nullptr;
-    registry.view<const Camera, const WorldTransform>().each(
-        [&](const Camera& c, const WorldTransform& world) {
-            if (!chosen || (c.active && !chosen->active)) {
-                chosen = &c;
-                chosenWorld = &world;
-            }
-        });
-    if (!chosen) return false;
+    const Entity entity = findActiveCamera(registry);
+    const Camera* chosen = registry.tryGet<Camera>(entity);
+    const WorldTransform* chosenWorld = registry.tryGet<WorldTransform>(entity);
+    if (!chosen || !chosenWorld) return false;
     const float aspect = float(settings().width) / float(settings().height);
     camera.view = glm::inverse(chosenWorld->matrix);
     camera.projection = glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar);
