@@ -1,14 +1,18 @@
 #pragma once
 // An independent CPU renderer for the GL image tests. Per pixel centre it finds the nearest
-// triangle along the camera ray (brute force Moller-Trumbore in double precision) and shades
-// direct light analytically with a hard shadow ray. It shares no code with the renderer: only
-// the physics (radiance = albedo / pi * E) and the documented light conventions.
+// triangle along the camera ray (Moller-Trumbore in double precision on every triangle a
+// bounding volume hierarchy cannot rule out) and shades direct light analytically with a hard
+// shadow ray. It shares no code with the renderer: only the physics
+// (radiance = albedo / pi * E + emission) and the documented light conventions.
 
 #include "runtime/io/ImageF.h"
 
+#include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace qgi::test {
@@ -17,7 +21,13 @@ struct RefTriangle {
     glm::dvec3 p0, p1, p2; ///< world, metres
     glm::dvec3 normal;     ///< unit, world; the side facing the camera is shaded
     glm::dvec3 albedo;
-    int surface = 0; ///< planar face the triangle belongs to (never shadows itself)
+    /// Convex surface the triangle belongs to (a planar face, a box, a capsule): it never
+    /// shadows itself; a light behind the triangle's own plane is hidden by it.
+    int surface = 0;
+    glm::dvec3 emission{0.0}; ///< W/(m^2 sr), added to the reflected radiance
+    /// Unit shading normals at p0, p1, p2, interpolated across the triangle (a smooth mesh);
+    /// none: shaded with `normal`.
+    std::optional<std::array<glm::dvec3, 3>> vertexNormals = std::nullopt;
 };
 
 enum class RefLightType { Point, Spot, Directional };
@@ -30,11 +40,12 @@ struct RefLight {
     double innerCone = 0.0, outerCone = 0.0;
 };
 
-/// A pinhole camera at `position` looking along world -Z with Y up.
+/// A pinhole camera at `position` looking along its local -Z with local Y up.
 struct RefCamera {
     glm::dvec3 position{0.0};
     double yfov = 0.9; ///< radians
     int width = 0, height = 0;
+    glm::dmat3 orientation{1.0}; ///< camera to world rotation
 };
 
 struct RefImage {
