@@ -5,6 +5,7 @@
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
+#include "runtime/io/IrradianceExport.h"
 #include "runtime/scene/SceneQueries.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GlWindow.h"
@@ -67,6 +68,16 @@ int runDemo(const DemoOptions& options) {
     }
 
     FrameSettings frameSettings;
+    if (options.photons > 0) {
+        frameSettings.photons->photonCount = options.photons;
+        frameSettings.photons->seed = options.seed;
+        frameSettings.photons->fullRecompute = options.fullRecompute;
+        frameSettings.irradiance.estimator = parseIrradianceEstimator(options.estimator);
+        frameSettings.irradiance.discRadius = options.discRadius;
+        frameSettings.irradiance.hybrid = options.mode == "hybrid";
+    } else {
+        frameSettings.photons.reset();
+    }
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();
     render.height = window.height();
@@ -113,6 +124,11 @@ int runDemo(const DemoOptions& options) {
     }
 
     if (options.screenshot) logInfo("wrote ", *options.screenshot, ".exr and .png");
+    if (options.exportIrradiance) {
+        ensureParentDirectory(*options.exportIrradiance);
+        exportVertexIrradiance(world, *options.exportIrradiance);
+        logInfo("wrote ", *options.exportIrradiance);
+    }
     if (options.profile) {
         ensureParentDirectory(*options.profile);
         profiler.writeChromeTrace(*options.profile + ".json");

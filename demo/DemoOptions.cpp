@@ -41,6 +41,19 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--mode", o.mode, "Lighting mode: photon (all light from photons) or hybrid "
                                      "(direct light from punctual lights in the shader)")
         ->check(CLI::IsMember({"photon", "hybrid"}));
+    app.add_option("--photons", o.photons,
+                   "Photon paths in the stored ray set (0: no global illumination)")
+        ->check(CLI::Range(0u, 100'000'000u));
+    app.add_option("--estimator", o.estimator,
+                   "Per-vertex irradiance estimator: detp (density estimation on the tangent "
+                   "plane), impact (impact count) or photonmap (k-nearest photon map)")
+        ->check(CLI::IsMember({"detp", "impact", "photonmap"}));
+    app.add_option("--disc-radius", o.discRadius,
+                   "DETP disc radius in metres (0: half the scene's mesh edge bound)")
+        ->check(CLI::Range(0.f, 100.f));
+    app.add_flag("--full-recompute", o.fullRecompute,
+                 "Re-shoot every photon and re-estimate every vertex each frame (the baseline "
+                 "the incremental update is measured against)");
     app.add_option("--exposure", o.exposure, "Multiplier on HDR radiance before the tonemap")
         ->check(CLI::Range(1e-6f, 1e6f));
     app.add_option("--max-edge", o.maxEdgeLength,
@@ -55,6 +68,9 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "(per-frame, per-entry times)");
     app.add_option("--export-scene", o.exportScene,
                    "Writes the loaded scene as glTF (.gltf or .glb) with qgi's conventions");
+    app.add_option("--export-irradiance", o.exportIrradiance,
+                   "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
+                   "er eg eb (W/m^2) and a mobile flag per vertex");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
 
     try {

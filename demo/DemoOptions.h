@@ -15,6 +15,10 @@ struct DemoOptions {
     int height = 720;
     std::string cameraPath = "scene"; ///< "scene" (the scene's own path), "none", or a CSV file
     std::string mode = "hybrid";      ///< "photon" or "hybrid"
+    std::uint32_t photons = 1'000'000; ///< photon paths in the stored ray set; 0: no photons
+    std::string estimator = "detp";   ///< "detp", "impact" or "photonmap"
+    float discRadius = 0.f;           ///< DETP disc radius in metres; 0: the scene's default
+    bool fullRecompute = false;       ///< re-shoot and re-estimate everything every frame
     float exposure = 1.f;             ///< multiplier on HDR radiance before tonemapping
     float maxEdgeLength = 0.f;        ///< mesh refinement bound in metres; 0: scene default
     double dt = 1.0 / 30.0;           ///< seconds per frame in headless runs
@@ -22,6 +26,7 @@ struct DemoOptions {
     std::optional<std::string> screenshot; ///< base path: writes .exr and .png after the last frame
     std::optional<std::string> profile;    ///< base path: writes .json (trace) and .csv
     std::optional<std::string> exportScene; ///< .gltf or .glb path, written after loading
+    std::optional<std::string> exportIrradiance; ///< .ply path, written after the last frame
     bool quiet = false;
 };
 

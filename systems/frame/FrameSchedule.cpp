@@ -11,12 +11,20 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.raytrace");
         registry.ctx().emplace<RayScene>().build(registry);
     }
+    if (settings.photons) {
+        mPhotons = std::make_unique<PhotonUpdateSystem>(*settings.photons);
+        mIrradiance = std::make_unique<DetpIrradianceSystem>(settings.irradiance);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.irradiance");
+        mIrradiance->build(registry);
+    }
     if (settings.render) mRender = std::make_unique<RenderSystem>(*settings.render);
 
     mSchedule.addPhase("input")
         .addPhase("animation")
         .addPhase("transform")
         .addPhase("raytrace.sync")
+        .addPhase("photon.update")
+        .addPhase("detp.irradiance")
         .addPhase("render");
 
     mSchedule.add("animation", "animation",
@@ -26,6 +34,12 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
     mSchedule.add("raytrace.sync", "raytrace.sync", [](Registry& r, const FrameContext&) {
         r.ctx().get<RayScene>().syncMoved(r);
     });
+    if (mPhotons) {
+        mSchedule.add("photon.update", "photon.update",
+                      [this](Registry& r, const FrameContext& f) { mPhotons->update(r, f); });
+        mSchedule.add("detp.irradiance", "detp.irradiance",
+                      [this](Registry& r, const FrameContext& f) { mIrradiance->update(r, f); });
+    }
     if (mRender)
         mSchedule.add("render", "render",
                       [this](Registry& r, const FrameContext& f) { mRender->update(r, f); });

@@ -3,6 +3,8 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/ecs/Schedule.h"
 #include "systems/animation/AnimationSystem.h"
+#include "systems/detp/DetpIrradianceSystem.h"
+#include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/render/RenderSystem.h"
 #include "systems/transform/TransformSystem.h"
 
@@ -12,6 +14,9 @@
 namespace qgi {
 
 struct FrameSettings {
+    /// Photon transport and per-vertex irradiance; off: no global illumination (direct only).
+    std::optional<PhotonSettings> photons = PhotonSettings{};
+    DetpSettings irradiance;
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
     std::optional<RenderSettings> render = RenderSettings{};
 };
@@ -22,6 +27,8 @@ struct FrameSettings {
  *    animation         scripted paths move cameras, mobiles, avatars, lights
  *    transform         world matrices; WorldTransform patched only where a pose changed
  *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
+ *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
+ *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
  *    render            uploads dirty ranges, draws, tonemaps
  *
  *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
@@ -33,11 +40,15 @@ public:
     Schedule& schedule() { return mSchedule; }
     void run(Registry& registry, const FrameContext& frame) { mSchedule.run(registry, frame); }
     RenderSystem* renderer() { return mRender.get(); }
+    PhotonUpdateSystem* photons() { return mPhotons.get(); }
+    DetpIrradianceSystem* irradiance() { return mIrradiance.get(); }
 
 private:
     Schedule mSchedule;
     AnimationSystem mAnimation;
     TransformSystem mTransform;
+    std::unique_ptr<PhotonUpdateSystem> mPhotons;
+    std::unique_ptr<DetpIrradianceSystem> mIrradiance;
     std::unique_ptr<RenderSystem> mRender;
 };
 

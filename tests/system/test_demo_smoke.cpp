@@ -79,7 +79,8 @@ TEST(DemoSmoke, HeadlessCornellWritesEveryRequestedFile) {
         if (e.at("cat") == "frame") ++frameEvents;
     }
     EXPECT_EQ(frameEvents, frames);
-    for (const char* entry : {"animation", "transform", "raytrace.sync", "render"})
+    for (const char* entry : {"animation", "transform", "raytrace.sync", "photon.update",
+                              "detp.irradiance", "render"})
         EXPECT_TRUE(names.count(entry)) << "no trace event for " << entry;
     std::ifstream csv(base + ".csv");
     std::string line;

@@ -1,0 +1,433 @@
+#include "systems/detp/DetpIrradianceSystem.h"
+
+#include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonPathGrid.h"
+#include "systems/photon_update/PhotonStore.h"
+
+#include <glm/gtc/constants.hpp>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+namespace qgi {
+namespace {
+
+/// Segments handed to a disc index at once: bounds the index's scratch during a full estimate.
+constexpr std::size_t kBatchSize = std::size_t(1) << 16;
+/// Vertices per task of the photon-map estimate.
+constexpr std::size_t kVertexGrain = 256;
+
+/// Whether segment s, extended by `tail` past its end, meets `box` (slab test). A segment that
+/// misses the box of a mesh's discs crosses none of them; testing that here costs a few
+/// nanoseconds, where Embree takes a tenth of a microsecond to reject it at its root.
+bool reachesBox(const PhotonSegments& segments, std::uint32_t s, float tail, const Aabb& box) {
+    const glm::vec3& o = segments.origin[s];
+    const glm::vec3& d = segments.direction[s];
+    float t0 = 0.f, t1 = segments.length[s] + tail;
+    for (int a = 0; a < 3; ++a) {
+        if (d[a] == 0.f) {
+            if (o[a] < box.min[a] || o[a] > box.max[a]) return false;
+            continue;
+        }
+        const float inverse = 1.f / d[a];
+        const float near = (box.min[a] - o[a]) * inverse, far = (box.max[a] - o[a]) * inverse;
+        t0 = std::max(t0, std::min(near, far));
+        t1 = std::min(t1, std::max(near, far));
+        if (t0 > t1) return false;
+    }
+    return true;
+}
+
+/// Every live segment of the store, path by path: a re-traced path leaves garbage behind in
+/// the segment array.
+void listAllSegments(const PhotonStore& store, std::vector<std::uint32_t>& out) {
+    out.clear();
+    for (const PhotonPath& path : store.paths)
+        for (std::uint32_t k = 0; k < path.count; ++k)
+            out.push_back(path.first + k);
+}
+
+} // namespace
+
+DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSettings(settings) {
+    validate(settings);
+}
+
+DetpIrradianceSystem::~DetpIrradianceSystem() = default;
+
+void DetpIrradianceSystem::build(Registry& registry) {
+    float radius = mSettings.discRadius;
+    if (radius == 0.f) {
+        const SceneInfo* info = registry.ctx().find<SceneInfo>();
+        if (!info)
+            fail("DETP: DetpSettings.discRadius is 0 (scene default) but the registry has no "
+                 "SceneInfo to scale it from");
+        radius = defaultDiscRadius(*info);
+    }
+    RayScene* rayScene = registry.ctx().find<RayScene>();
+    if (!rayScene) fail("DETP: the registry has no RayScene (its Embree device hosts the discs)");
+
+    ReceiverSet receivers;
+    receivers.build(registry);
+    auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
+    const std::uint32_t staticCount = receivers.staticVertexCount();
+    staticDiscs->build(receivers.positions().first(staticCount),
+                       receivers.normals().first(staticCount), radius);
+    std::vector<std::unique_ptr<DiscIndex>> mobileDiscs(receivers.receivers().size());
+    for (std::size_t r = 0; r < mobileDiscs.size(); ++r) {
+        const auto& receiver = receivers.receivers()[r];
+        if (!receiver.mobile) continue;
+        mobileDiscs[r] = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Moving);
+        mobileDiscs[r]->build(
+            receivers.positions().subspan(receiver.firstVertex, receiver.vertexCount),
+            receivers.normals().subspan(receiver.firstVertex, receiver.vertexCount), radius);
+    }
+
+    mRadius = radius;
+    mPhotonMapRadius = mSettings.photonMapMaxRadius > 0.f ? mSettings.photonMapMaxRadius
+                                                          : kPhotonMapRadiusPerDisc * radius;
+    mReceivers = std::move(receivers);
+    mStaticDiscs = std::move(staticDiscs);
+    mMobileDiscs = std::move(mobileDiscs);
+    const std::size_t vertices = mReceivers.vertexCount();
+    mPowerSum.assign(vertices, glm::dvec3(0.0));
+    mUpdateCount.assign(vertices, 0);
+    mIrradiance.assign(vertices, glm::vec3(0.f));
+    mIsTouched.assign(vertices, 0);
+    mIsMoved.assign(mReceivers.receivers().size(), 0);
+    mBuilt = true;
+    mNeedsFull = true;
+    logInfo("DETP: ", irradianceEstimatorName(mSettings.estimator), " over ", vertices,
+            " vertices (", staticCount, " static) in ", mReceivers.receivers().size(),
+            " meshes, disc radius ", mRadius, " m", mSettings.hybrid ? ", hybrid" : "");
+}
+
+void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
+    QGI_ASSERT(mBuilt, "DetpIrradianceSystem::build must run before update");
+    mStats = {};
+    const PhotonStore* store = registry.ctx().find<PhotonStore>();
+    const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
+    if (!store || !delta) return;
+    collectMovedMobiles(registry, *delta);
+    const bool full = delta->full || mNeedsFull;
+    mNeedsFull = false;
+    switch (mSettings.estimator) {
+    case IrradianceEstimator::Detp:
+        updateDetp(registry, *store, *delta, full);
+        break;
+    case IrradianceEstimator::ImpactCount:
+        updateImpacts(registry, *store, *delta, full);
+        break;
+    case IrradianceEstimator::PhotonMap:
+        updatePhotonMap(registry, *store, *delta, full);
+        break;
+    }
+    mStats.full = full;
+}
+
+void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const PhotonDelta& delta) {
+    for (const std::uint32_t r : mMoved)
+        mIsMoved[r] = 0;
+    mMoved.clear();
+    const auto consider = [&](Entity e) {
+        const std::int64_t r = mReceivers.find(e);
+        if (r < 0 || !mReceivers.receivers()[std::size_t(r)].mobile || mIsMoved[std::size_t(r)])
+            return;
+        // A pose the ray scene would refuse too: keep the mobile's light where it was.
+        if (!mReceivers.refreshPose(registry, std::uint32_t(r))) return;
+        mIsMoved[std::size_t(r)] = 1;
+        mMoved.push_back(std::uint32_t(r));
+    };
+    for (const Entity e : registry.changed<WorldTransform>())
+        consider(e);
+    for (const Entity e : delta.movedMobiles)
+        consider(e);
+    std::sort(mMoved.begin(), mMoved.end());
+    if (mSettings.estimator != IrradianceEstimator::Detp) return;
+    for (const std::uint32_t r : mMoved) {
+        const auto& receiver = mReceivers.receivers()[r];
+        mMobileDiscs[r]->move(
+            mReceivers.positions().subspan(receiver.firstVertex, receiver.vertexCount),
+            mReceivers.normals().subspan(receiver.firstVertex, receiver.vertexCount));
+    }
+}
+
+std::span<const std::uint32_t> DetpIrradianceSystem::sequence(std::size_t count) {
+    if (mSequence.size() < count) {
+        const std::size_t from = mSequence.size();
+        mSequence.resize(count);
+        std::iota(mSequence.begin() + std::ptrdiff_t(from), mSequence.end(), std::uint32_t(from));
+    }
+    return std::span<const std::uint32_t>(mSequence).first(count);
+}
+
+// ---- DETP ---------------------------------------------------------------------------------
+
+void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
+                                           const PhotonSegments& segments,
+                                           std::span<const std::uint32_t> indices,
+                                           std::span<const float> beyond, double sign,
+                                           bool incremental) {
+    for (std::size_t begin = 0; begin < indices.size(); begin += kBatchSize) {
+        const std::size_t count = std::min(kBatchSize, indices.size() - begin);
+        discs.collectCrossings(segments, indices.subspan(begin, count), mSettings.hybrid,
+                               mCrossings, beyond.empty() ? beyond : beyond.subspan(begin, count));
+        mStats.crossings += mCrossings.size();
+        for (const DiscCrossing& c : mCrossings) {
+            const std::uint32_t v = firstVertex + c.disc;
+            mPowerSum[v] += sign * glm::dvec3(segments.power[c.segment]);
+            if (!incremental) continue;
+            if (++mUpdateCount[v] >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
+            if (!mIsTouched[v]) {
+                mIsTouched[v] = 1;
+                mTouched.push_back(v);
+            }
+        }
+    }
+}
+
+Aabb DetpIrradianceSystem::discBounds(std::uint32_t receiver) const {
+    // A crossing point lies within r of a vertex; 1% more covers rounding.
+    Aabb box = mReceivers.receivers()[receiver].bounds;
+    const glm::vec3 reach(1.01f * mRadius);
+    box.min -= reach;
+    box.max += reach;
+    return box;
+}
+
+float DetpIrradianceSystem::crossingTail() const {
+    // How far past its end a segment may still cross a disc (crossesDisc), with DiscIndex's slack.
+    return (kDiscEndTolerance + DiscIndex::kEmbreeSlack) * mRadius;
+}
+
+void DetpIrradianceSystem::estimateMobile(const Registry& registry, const PhotonStore& store,
+                                          std::uint32_t r) {
+    const auto& receiver = mReceivers.receivers()[r];
+    const std::uint32_t first = receiver.firstVertex, end = first + receiver.vertexCount;
+    std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
+    std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
+
+    const Aabb box = discBounds(r);
+    const float tail = crossingTail();
+    mSegmentList.clear();
+    const auto addPath = [&](std::uint32_t p) {
+        const PhotonPath& path = store.paths[p];
+        for (std::uint32_t k = 0; k < path.count; ++k)
+            if (reachesBox(store.segments, path.first + k, tail, box))
+                mSegmentList.push_back(path.first + k);
+    };
+    if (const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>()) {
+        // In increasing path order, as a full estimate sums them: the same sums, bit for bit.
+        grid->pathsOverlapping(box, mCandidatePaths);
+        for (const std::uint32_t p : mCandidatePaths)
+            addPath(p);
+        mStats.candidatePaths += mCandidatePaths.size();
+    } else {
+        for (std::uint32_t p = 0; p < store.paths.size(); ++p)
+            addPath(p);
+        mStats.candidatePaths += store.paths.size();
+    }
+    mStats.candidateSegments += mSegmentList.size();
+    accumulateDiscs(*mMobileDiscs[r], first, store.segments, mSegmentList, {}, 1.0, false);
+
+    const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
+    for (std::uint32_t v = first; v < end; ++v)
+        mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+}
+
+void DetpIrradianceSystem::splitDelta(const PhotonDelta& delta) {
+    QGI_ASSERT(delta.oldFirst.size() == delta.paths.size() + 1 &&
+                   delta.newFirst.size() == delta.paths.size() + 1,
+               "PhotonDelta: oldFirst and newFirst hold one entry per path, plus one");
+    constexpr float kWhole = -std::numeric_limits<float>::infinity();
+    DeltaPart& subtract = mDeltaParts[0];
+    DeltaPart& add = mDeltaParts[1];
+    subtract.segments = &delta.oldSegments;
+    add.segments = &delta.newSegments;
+    for (DeltaPart* part : {&subtract, &add}) {
+        part->indices.clear();
+        part->beyond.clear();
+    }
+    const PhotonSegments& before = delta.oldSegments;
+    const PhotonSegments& after = delta.newSegments;
+    for (std::size_t i = 0; i < delta.paths.size(); ++i) {
+        std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
+        const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
+        // The two heads are one ray stopped at different lengths: the crossings of the shorter
+        // one are also the longer one's and cancel exactly, so only the longer one's crossings
+        // beyond the shorter one's end are applied.
+        if (o < oldEnd && n < newEnd && before.origin[o] == after.origin[n] &&
+            before.direction[o] == after.direction[n] && before.power[o] == after.power[n] &&
+            before.bounce[o] == after.bounce[n]) {
+            if (after.length[n] < before.length[o]) {
+                subtract.indices.push_back(o);
+                subtract.beyond.push_back(after.length[n]);
+            } else if (before.length[o] < after.length[n]) {
+                add.indices.push_back(n);
+                add.beyond.push_back(before.length[o]);
+            }
+            ++o;
+            ++n;
+        }
+        for (; o < oldEnd; ++o) {
+            subtract.indices.push_back(o);
+            subtract.beyond.push_back(kWhole);
+        }
+        for (; n < newEnd; ++n) {
+            add.indices.push_back(n);
+            add.beyond.push_back(kWhole);
+        }
+    }
+}
+
+void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& store,
+                                      const PhotonDelta& delta, bool full) {
+    const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
+    const auto receivers = mReceivers.receivers();
+    if (full) {
+        std::fill(mPowerSum.begin(), mPowerSum.end(), glm::dvec3(0.0));
+        std::fill(mUpdateCount.begin(), mUpdateCount.end(), 0u);
+        listAllSegments(store, mSegmentList);
+        accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
+        for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
+            mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+        for (std::uint32_t r = 0; r < receivers.size(); ++r)
+            if (receivers[r].mobile) estimateMobile(registry, store, r);
+        publishAll(registry);
+        return;
+    }
+
+    mTouched.clear();
+    if (!delta.paths.empty()) {
+        mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
+        splitDelta(delta);
+        for (const DeltaPart& part : mDeltaParts)
+            accumulateDiscs(*mStaticDiscs, 0, *part.segments, part.indices, part.beyond, part.sign,
+                            true);
+        // Mobiles that kept their pose take the same update, from the delta segments near them.
+        const float tail = crossingTail();
+        for (std::uint32_t r = 0; r < receivers.size(); ++r) {
+            if (!receivers[r].mobile || mIsMoved[r]) continue;
+            const Aabb box = discBounds(r);
+            for (const DeltaPart& part : mDeltaParts) {
+                mSegmentList.clear();
+                mBeyondList.clear();
+                for (std::size_t k = 0; k < part.indices.size(); ++k) {
+                    if (!reachesBox(*part.segments, part.indices[k], tail, box)) continue;
+                    mSegmentList.push_back(part.indices[k]);
+                    mBeyondList.push_back(part.beyond[k]);
+                }
+                accumulateDiscs(*mMobileDiscs[r], receivers[r].firstVertex, *part.segments,
+                                mSegmentList, mBeyondList, part.sign, true);
+            }
+        }
+    }
+    for (const std::uint32_t v : mTouched) {
+        mIsTouched[v] = 0;
+        mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+    }
+    std::sort(mTouched.begin(), mTouched.end());
+    mReceivers.publish(registry, mIrradiance, mTouched);
+    mStats.verticesWritten = mTouched.size();
+
+    for (const std::uint32_t r : mMoved) {
+        estimateMobile(registry, store, r);
+        mReceivers.publishReceiver(registry, mIrradiance, r);
+        mStats.verticesWritten += receivers[r].vertexCount;
+    }
+    mStats.movedMobiles = mMoved.size();
+}
+
+// ---- impact count -------------------------------------------------------------------------
+
+void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& store,
+                                         const PhotonDelta& delta, bool full) {
+    if (full) {
+        mImpacts.reset(mReceivers, mSettings.hybrid);
+        listAllSegments(store, mSegmentList);
+        mImpacts.accumulate(mReceivers, store.segments, mSegmentList, 1.0);
+        mImpacts.takeTouchedVertices(mTouched); // forgotten: every vertex is published below
+        for (std::uint32_t v = 0; v < mReceivers.vertexCount(); ++v)
+            mIrradiance[v] = mImpacts.irradiance(v);
+        publishAll(registry);
+        return;
+    }
+    if (delta.paths.empty()) return; // rigid mobiles keep their triangles' areas: no change
+    mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
+    const auto indices = sequence(std::max(delta.oldSegments.size(), delta.newSegments.size()));
+    mImpacts.accumulate(mReceivers, delta.oldSegments, indices.first(delta.oldSegments.size()),
+                        -1.0);
+    mImpacts.accumulate(mReceivers, delta.newSegments, indices.first(delta.newSegments.size()),
+                        1.0);
+    if (mImpacts.maxUpdates() >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
+    mImpacts.takeTouchedVertices(mTouched);
+    for (const std::uint32_t v : mTouched)
+        mIrradiance[v] = mImpacts.irradiance(v);
+    mReceivers.publish(registry, mIrradiance, mTouched);
+    mStats.verticesWritten = mTouched.size();
+}
+
+// ---- photon map ---------------------------------------------------------------------------
+
+void DetpIrradianceSystem::estimatePhotonMap(std::uint32_t firstVertex, std::uint32_t count) {
+    const auto positions = mReceivers.positions();
+    const auto normals = mReceivers.normals();
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(firstVertex, firstVertex + count,
+                                                        std::uint32_t(kVertexGrain)),
+                      [&](const tbb::blocked_range<std::uint32_t>& range) {
+                          std::vector<PhotonKdTree::Neighbour> scratch;
+                          scratch.reserve(mSettings.photonMapNeighbours);
+                          for (std::uint32_t v = range.begin(); v != range.end(); ++v)
+                              mIrradiance[v] = mPhotonMap.estimateIrradiance(
+                                  positions[v], normals[v], mSettings.photonMapNeighbours,
+                                  mPhotonMapRadius, scratch);
+                      });
+}
+
+void DetpIrradianceSystem::updatePhotonMap(Registry& registry, const PhotonStore& store,
+                                           const PhotonDelta& delta, bool full) {
+    if (full || !delta.paths.empty()) {
+        // Not additive: rebuild from every stored hit and re-estimate everything.
+        std::vector<PhotonKdTree::Photon> photons;
+        photons.reserve(store.segments.size());
+        for (const PhotonPath& path : store.paths) {
+            for (std::uint32_t k = 0; k < path.count; ++k) {
+                const std::uint32_t s = path.first + k;
+                const PhotonSegments& segments = store.segments;
+                if (segments.hitEntity[s].isNull() || !std::isfinite(segments.length[s]) ||
+                    (mSettings.hybrid && segments.bounce[s] == 0))
+                    continue;
+                photons.push_back({segments.origin[s] + segments.length[s] * segments.direction[s],
+                                   segments.power[s], segments.direction[s]});
+            }
+        }
+        mPhotonMap.build(std::move(photons));
+        estimatePhotonMap(0, std::uint32_t(mReceivers.vertexCount()));
+        mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
+        publishAll(registry);
+        return;
+    }
+    for (const std::uint32_t r : mMoved) {
+        const auto& receiver = mReceivers.receivers()[r];
+        estimatePhotonMap(receiver.firstVertex, receiver.vertexCount);
+        mReceivers.publishReceiver(registry, mIrradiance, r);
+        mStats.verticesWritten += receiver.vertexCount;
+    }
+    mStats.movedMobiles = mMoved.size();
+}
+
+void DetpIrradianceSystem::publishAll(Registry& registry) {
+    for (std::uint32_t r = 0; r < mReceivers.receivers().size(); ++r)
+        mReceivers.publishReceiver(registry, mIrradiance, r);
+    mStats.verticesWritten = mReceivers.vertexCount();
+}
+
+} // namespace qgi

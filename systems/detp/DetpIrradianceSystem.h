@@ -1,0 +1,157 @@
+#pragma once
+
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+#include "systems/detp/DetpSettings.h"
+#include "systems/detp/DiscCrossing.h"
+#include "systems/detp/DiscIndex.h"
+#include "systems/detp/ImpactCounter.h"
+#include "systems/detp/PhotonKdTree.h"
+#include "systems/detp/ReceiverSet.h"
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+namespace qgi {
+
+struct PhotonDelta;
+struct PhotonStore;
+struct PhotonSegments;
+
+/** Per-vertex irradiance of every StaticMesh and MobileMesh from the photon ray set
+ *  (seed 000 sections 2.4-2.7).
+ *
+ *  DETP (the default estimator): E(v) = sum of the power of the segments that cross the disc
+ *  of radius r on v's tangent plane from the front (crossesDisc(), segments that left the
+ *  scene included) / (pi r^2). It is additive per segment, so:
+ *   - when the ray set was rebuilt (PhotonDelta::full, or the first frame) every vertex is
+ *     estimated in full;
+ *   - otherwise static vertices, and those of mobiles that did not move, take
+ *     E += E(new segments) - E(old segments): only the delta goes through the disc indices,
+ *     and a vertex whose disc no delta segment crosses is not written (bit-identical). A
+ *     re-traced path's old and new heads are one ray stopped at two lengths (a mobile moved
+ *     into or out of its way); the crossings they share cancel exactly, so only the longer
+ *     head is traced, beyond the shorter one's end;
+ *   - the vertices of a mobile that moved (its WorldTransform changed, or it is in
+ *     PhotonDelta::movedMobiles) are re-estimated in full at the new pose from the segments of
+ *     the paths the PhotonPathGrid finds near the mobile, so the whole ray set is never
+ *     scanned. Without a PhotonPathGrid resource every stored path is a candidate.
+ *  Sums are kept per vertex in double precision and applied in a fixed order (DiscIndex), so
+ *  the same frames give bit-identical irradiance on any thread count.
+ *
+ *  Drift policy: an incremental sum differs from a fresh one by at most (additions since its
+ *  last full estimate) x 2^-53 x (its largest partial sum). Once any vertex has taken
+ *  maxIncrementalUpdates additions (default 2^24: a bound of 2^-29 relative, 1/32 of the
+ *  rounding of the float that is published) the next frame re-estimates everything. At a
+ *  hundred additions per vertex per frame that is two hours of play between re-estimates.
+ *
+ *  The comparison estimators (settings.estimator):
+ *   - impact count (ImpactCounter): additive per triangle, so it is updated from the delta
+ *     alone, static and mobile triangles alike (the seed's Add/Subtract);
+ *   - photon map (PhotonKdTree, Jensen's k-nearest estimate): not additive (the radius
+ *     depends on the whole set), so any change to the ray set rebuilds the tree from every
+ *     stored hit and re-estimates every vertex; a mobile that moved without changing the
+ *     ray set is re-estimated alone. That full cost every frame is the point of comparing.
+ *  Hybrid mode skips segments that leave a light (bounce 0) in all three.
+ *
+ *  Reads:  ctx<const PhotonStore>, ctx<const PhotonDelta>, ctx<const PhotonPathGrid> (when
+ *          present), const WorldTransform (and its change list), const MobileMesh;
+ *          build(): also const StaticMesh, const Mesh, const Name, ctx<RayScene> (its device),
+ *          ctx<const SceneInfo> (default radius)
+ *  Writes: VertexIrradiance (irradiance and dirty ranges; emplaced by build())          */
+class DetpIrradianceSystem {
+public:
+    /// What the last update() did, for profiling and tests.
+    struct FrameStats {
+        bool full = false;                 ///< every vertex was estimated from scratch
+        std::size_t deltaSegments = 0;     ///< old + new segments traced incrementally
+        std::size_t movedMobiles = 0;      ///< mobiles re-estimated in full
+        std::size_t candidatePaths = 0;    ///< paths looked at for them (PhotonPathGrid)
+        std::size_t candidateSegments = 0; ///< their segments that reach the mobile, traced
+        std::size_t crossings = 0;         ///< (segment, disc) pairs applied
+        std::size_t verticesWritten = 0;
+    };
+
+    /// Throws qgi::Error for settings out of range (see validate()).
+    explicit DetpIrradianceSystem(const DetpSettings& settings);
+    DetpIrradianceSystem(const DetpIrradianceSystem&) = delete;
+    DetpIrradianceSystem& operator=(const DetpIrradianceSystem&) = delete;
+    ~DetpIrradianceSystem();
+
+    /// Set-up, once the scene, its WorldTransforms and the RayScene exist: reads the meshes,
+    /// resolves the disc radius and builds the disc indices. Call again after meshes are added
+    /// or removed. Throws qgi::Error on a mesh it cannot use or a missing resource.
+    void build(Registry& registry);
+
+    /// The frame: applies this frame's PhotonDelta (nothing to do while there is no
+    /// PhotonStore/PhotonDelta). Never throws.
+    void update(Registry& registry, const FrameContext& frame);
+
+    const DetpSettings& settings() const { return mSettings; }
+    /// The disc radius r in use, metres (after build()).
+    float discRadius() const { return mRadius; }
+    const FrameStats& lastFrame() const { return mStats; }
+
+private:
+    void collectMovedMobiles(const Registry& registry, const PhotonDelta& delta);
+    Aabb discBounds(std::uint32_t receiver) const;
+    float crossingTail() const;
+    std::span<const std::uint32_t> sequence(std::size_t count);
+
+    void updateDetp(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
+                    bool full);
+    void splitDelta(const PhotonDelta& delta);
+    void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
+                         const PhotonSegments& segments, std::span<const std::uint32_t> indices,
+                         std::span<const float> beyond, double sign, bool incremental);
+    void estimateMobile(const Registry& registry, const PhotonStore& store, std::uint32_t receiver);
+    void updateImpacts(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
+                       bool full);
+    void updatePhotonMap(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
+                         bool full);
+    void estimatePhotonMap(std::uint32_t firstVertex, std::uint32_t count);
+    void publishAll(Registry& registry);
+
+    DetpSettings mSettings;
+    float mRadius = 0.f;
+    float mPhotonMapRadius = 0.f;
+    bool mBuilt = false;
+    bool mNeedsFull = true;
+    FrameStats mStats;
+
+    ReceiverSet mReceivers;
+    std::unique_ptr<DiscIndex> mStaticDiscs;
+    std::vector<std::unique_ptr<DiscIndex>> mMobileDiscs; ///< per receiver; null for static
+    std::vector<glm::dvec3> mPowerSum;                    ///< DETP: W crossing each vertex's disc
+    std::vector<std::uint32_t> mUpdateCount; ///< DETP: additions since the last full estimate
+    std::vector<glm::vec3> mIrradiance;      ///< W/m^2 per vertex, staged for publishing
+    ImpactCounter mImpacts;
+    PhotonKdTree mPhotonMap;
+
+    /// What the incremental update applies: the old segments with sign -1, the new with +1;
+    /// each listed segment counts beyond a length (-inf: whole; see splitDelta).
+    struct DeltaPart {
+        const PhotonSegments* segments = nullptr;
+        double sign = 1.0;
+        std::vector<std::uint32_t> indices;
+        std::vector<float> beyond;
+    };
+
+    // Frame scratch, kept so the frame path does not allocate once warm.
+    DeltaPart mDeltaParts[2] = {{nullptr, -1.0, {}, {}}, {nullptr, 1.0, {}, {}}};
+    std::vector<float> mBeyondList;
+    std::vector<std::uint32_t> mMoved;  ///< receiver indices of mobiles that moved
+    std::vector<std::uint8_t> mIsMoved; ///< per receiver
+    std::vector<std::uint32_t> mSegmentList;
+    std::vector<std::uint32_t> mSequence; ///< 0, 1, 2, ...
+    std::vector<std::uint32_t> mCandidatePaths;
+    std::vector<DiscCrossing> mCrossings;
+    std::vector<std::uint32_t> mTouched;
+    std::vector<std::uint8_t> mIsTouched; ///< per vertex
+};
+
+} // namespace qgi

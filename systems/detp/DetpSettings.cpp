@@ -1,0 +1,55 @@
+#include "systems/detp/DetpSettings.h"
+
+#include "runtime/core/Error.h"
+#include "runtime/scene/SceneInfo.h"
+
+#include <glm/geometric.hpp>
+
+#include <cmath>
+
+namespace qgi {
+
+IrradianceEstimator parseIrradianceEstimator(std::string_view name) {
+    if (name == "detp") return IrradianceEstimator::Detp;
+    if (name == "impact") return IrradianceEstimator::ImpactCount;
+    if (name == "photonmap") return IrradianceEstimator::PhotonMap;
+    fail("unknown irradiance estimator '", name, "' (expected detp, impact or photonmap)");
+}
+
+std::string_view irradianceEstimatorName(IrradianceEstimator estimator) {
+    switch (estimator) {
+    case IrradianceEstimator::Detp:
+        return "detp";
+    case IrradianceEstimator::ImpactCount:
+        return "impact";
+    case IrradianceEstimator::PhotonMap:
+        return "photonmap";
+    }
+    return "?";
+}
+
+float defaultDiscRadius(const SceneInfo& info) {
+    if (info.maxEdgeLength > 0.f && std::isfinite(info.maxEdgeLength))
+        return 0.5f * info.maxEdgeLength;
+    const float diagonal = info.bounds.empty() ? 0.f : glm::length(info.bounds.extent());
+    if (!(diagonal > 0.f) || !std::isfinite(diagonal))
+        fail("SceneInfo of '", info.name,
+             "': no maxEdgeLength and empty bounds, so there is no default DETP disc radius "
+             "(set DetpSettings.discRadius)");
+    return 0.01f * diagonal;
+}
+
+void validate(const DetpSettings& settings) {
+    if (!std::isfinite(settings.discRadius) || settings.discRadius < 0.f)
+        fail("DetpSettings.discRadius = ", settings.discRadius,
+             ": must be a finite number of metres >= 0 (0: scene default)");
+    if (settings.photonMapNeighbours == 0)
+        fail("DetpSettings.photonMapNeighbours = 0: the photon map needs at least 1 neighbour");
+    if (!std::isfinite(settings.photonMapMaxRadius) || settings.photonMapMaxRadius < 0.f)
+        fail("DetpSettings.photonMapMaxRadius = ", settings.photonMapMaxRadius,
+             ": must be a finite number of metres >= 0 (0: default)");
+    if (settings.maxIncrementalUpdates == 0)
+        fail("DetpSettings.maxIncrementalUpdates = 0: must be at least 1");
+}
+
+} // namespace qgi

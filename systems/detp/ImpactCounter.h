@@ -1,0 +1,60 @@
+#pragma once
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace qgi {
+
+class ReceiverSet;
+struct PhotonSegments;
+
+/** Impact count (seed 000 sections 3.5 and 3.6.1), kept for comparison with DETP.
+ *  Each receiver triangle accumulates the power of the segments that end on it (from either
+ *  side: a stored hit is an impact), in double precision, so the paper's Add/Subtract update
+ *  is exact up to rounding for static and mobile triangles alike. A vertex's irradiance is
+ *  the area-weighted mean of its incident triangles' power / area,
+ *      E(v) = sum_t P_t / sum_t A_t   over the triangles t around v,
+ *  which is the flux through the vertex's one-ring over the ring's area: unbiased under
+ *  uniform light, and not swayed by a sliver triangle that happened to catch one photon.   */
+class ImpactCounter {
+public:
+    /// Sizes the per-triangle sums for `receivers` (triangles, areas, adjacency) and zeroes
+    /// them. With `skipDirect` (hybrid mode) segments that leave a light are not counted.
+    void reset(const ReceiverSet& receivers, bool skipDirect);
+
+    /// Adds `sign` x power of every segment indices[k] of `segments` that hit a receiver
+    /// triangle. Sequential, in index order: the same calls give bit-identical sums.
+    void accumulate(const ReceiverSet& receivers, const PhotonSegments& segments,
+                    std::span<const std::uint32_t> indices, double sign);
+
+    /// The vertices around triangles that accumulate() changed since the last call, ascending;
+    /// forgets them.
+    void takeTouchedVertices(std::vector<std::uint32_t>& out);
+
+    /// W/m^2 at a vertex (global index of the ReceiverSet).
+    glm::vec3 irradiance(std::uint32_t vertex) const;
+    /// W of impacts per triangle (global index of the ReceiverSet).
+    std::span<const glm::dvec3> trianglePower() const { return mTrianglePower; }
+    /// The most additions any triangle's sum has taken since reset(): its rounding error is
+    /// at most that many times 2^-53 of its largest partial sum.
+    std::uint32_t maxUpdates() const { return mMaxUpdates; }
+
+private:
+    bool mSkipDirect = false;
+    std::vector<glm::uvec3> mTriangles; ///< global vertex ids
+    std::vector<glm::dvec3> mTrianglePower;
+    std::vector<std::uint32_t> mUpdateCount; ///< per triangle, additions since reset()
+    std::uint32_t mMaxUpdates = 0;
+    std::vector<float> mTriangleArea;      ///< m^2
+    std::vector<double> mRingArea;         ///< per vertex: sum of incident triangle areas
+    std::vector<std::uint32_t> mRingStart; ///< per vertex + 1: range in mRingTriangles
+    std::vector<std::uint32_t> mRingTriangles;
+    std::vector<std::uint32_t> mTouchedTriangles;
+    std::vector<std::uint8_t> mTriangleTouched;
+    std::vector<std::uint8_t> mVertexTouched;
+};
+
+} // namespace qgi

@@ -1,0 +1,342 @@
+#include "systems/photon_update/PhotonPathGrid.h"
+
+#include "runtime/core/Error.h"
+
+#include <glm/common.hpp>
+#include <glm/vector_relational.hpp>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
+
+namespace qgi {
+namespace {
+
+// Paths per chunk: re-indexing one takes a few milliseconds.
+constexpr std::size_t kChunkPaths = 4096;
+// Each chunk keeps an offset per cell; chunks grow past kChunkPaths where needed to keep all
+// the offsets below this many.
+constexpr std::size_t kMaxChunkOffsets = std::size_t(1) << 24;
+// Changed paths per task when computing their extents.
+constexpr std::size_t kExtentGrain = 256;
+
+/// The part of origin + t direction, t in [0, length], inside the box: [near, far] (empty
+/// when near > far).
+std::pair<float, float> clipToBox(const glm::vec3& o, const glm::vec3& d, float length,
+                                  const glm::vec3& low, const glm::vec3& high) {
+    float near = 0.f, far = length;
+    for (int axis = 0; axis < 3; ++axis) {
+        if (d[axis] == 0.f) {
+            if (o[axis] < low[axis] || o[axis] > high[axis]) return {1.f, 0.f};
+            continue;
+        }
+        float t0 = (low[axis] - o[axis]) / d[axis], t1 = (high[axis] - o[axis]) / d[axis];
+        if (t0 > t1) std::swap(t0, t1);
+        near = std::max(near, t0);
+        far = std::min(far, t1);
+    }
+    return {near, far};
+}
+
+bool overlaps(const Aabb& a, const Aabb& b) {
+    return !a.empty() && !b.empty() && glm::all(glm::lessThanEqual(a.min, b.max)) &&
+           glm::all(glm::lessThanEqual(b.min, a.max));
+}
+
+} // namespace
+
+std::uint32_t PhotonPathGrid::Marks::nextToken() {
+    if (token == std::numeric_limits<std::uint32_t>::max()) {
+        std::fill(mark.begin(), mark.end(), 0u);
+        token = 0;
+    }
+    return ++token;
+}
+
+PhotonPathGrid::Marks& PhotonPathGrid::localMarks() const {
+    Marks& marks = mMarks.local();
+    if (marks.mark.size() != cellCount() + 1) {
+        marks.mark.assign(cellCount() + 1, 0u);
+        marks.token = 0;
+    }
+    return marks;
+}
+
+/// Visits the cell of every point of the straight line from a to b, both inside the closed
+/// box [0, mCells] of grid space: a 3D-DDA (Amanatides and Woo) that steps each axis exactly
+/// as many times as a's and b's cells differ on it, so rounding can neither skip b's cell
+/// nor run past it.
+template <typename Fn>
+void PhotonPathGrid::walkLine(const glm::vec3& a, const glm::vec3& b, Fn& fn) const {
+    const glm::ivec3 top = mCells - 1;
+    const glm::ivec3 cell = glm::clamp(glm::ivec3(glm::floor(a)), glm::ivec3(0), top);
+    const glm::ivec3 end = glm::clamp(glm::ivec3(glm::floor(b)), glm::ivec3(0), top);
+    std::int64_t index = cellIndex(cell);
+    fn(std::uint32_t(index));
+    const std::int64_t strides[3] = {1, mCells.x, std::int64_t(mCells.x) * mCells.y};
+    std::int64_t stride[3] = {0, 0, 0};
+    int remaining[3];
+    float tMax[3], tDelta[3];
+    int steps = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+        const int n = end[axis] - cell[axis];
+        remaining[axis] = std::abs(n);
+        steps += remaining[axis];
+        tMax[axis] = tDelta[axis] = std::numeric_limits<float>::infinity();
+        if (n == 0) continue; // different cells imply a[axis] != b[axis]
+        const float inverse = 1.f / std::abs(b[axis] - a[axis]);
+        const float boundary = float(cell[axis] + (n > 0 ? 1 : 0));
+        stride[axis] = n > 0 ? strides[axis] : -strides[axis];
+        tMax[axis] = std::abs(boundary - a[axis]) * inverse;
+        tDelta[axis] = inverse;
+    }
+    for (; steps > 0; --steps) {
+        // An axis with no steps left has tMax = inf and is never chosen.
+        const int axis =
+            tMax[0] < tMax[1] ? (tMax[0] < tMax[2] ? 0 : 2) : (tMax[1] < tMax[2] ? 1 : 2);
+        index += stride[axis];
+        fn(std::uint32_t(index));
+        tMax[axis] = --remaining[axis] == 0 ? std::numeric_limits<float>::infinity()
+                                            : tMax[axis] + tDelta[axis];
+    }
+}
+
+/// Visits the cells of segments [first, first + count): the cells their part inside the box
+/// crosses, and the outside cell when part of a segment lies beyond the box.
+template <typename Fn>
+void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t first,
+                                 std::size_t count, Fn&& fn) const {
+    const glm::vec3 size(mCells);
+    const float inverse = 1.f / mCellSize;
+    const auto inside = [&](const glm::vec3& p) {
+        return p.x >= 0.f && p.y >= 0.f && p.z >= 0.f && p.x <= size.x && p.y <= size.y &&
+               p.z <= size.z;
+    };
+    for (std::size_t s = first; s < first + count; ++s) {
+        const glm::vec3 o = (segments.origin[s] - mBounds.min) * inverse;
+        const glm::vec3 d = segments.direction[s] * inverse;
+        const float length = segments.length[s];
+        if (std::isfinite(length)) {
+            const glm::vec3 end = o + length * d;
+            if (inside(o) && inside(end)) { // the common case: a bounce inside the scene
+                walkLine(o, end, fn);
+                continue;
+            }
+        }
+        // Clip to the box; whatever is cut off lies outside.
+        const auto [near, far] = clipToBox(o, d, length, glm::vec3(0.f), size);
+        fn(outsideCell());
+        if (near <= far)
+            walkLine(glm::clamp(o + near * d, glm::vec3(0.f), size),
+                     glm::clamp(o + far * d, glm::vec3(0.f), size), fn);
+    }
+}
+
+void PhotonPathGrid::indexChunk(const PhotonStore& store, Chunk& chunk) const {
+    Marks& marks = localMarks();
+    const std::size_t cells = cellCount() + 1; // and the outside cell
+    // Calls fn(cell) once for each distinct cell of path p.
+    const auto walkPath = [&](std::uint32_t p, auto&& fn) {
+        const std::uint32_t token = marks.nextToken();
+        const PhotonPath& path = store.paths[p];
+        forEachCell(store.segments, path.first, path.count, [&](std::uint32_t cell) {
+            if (marks.mark[cell] == token) return;
+            marks.mark[cell] = token;
+            fn(cell);
+        });
+    };
+    chunk.offsets.assign(cells + 1, 0);
+    for (std::uint32_t p = chunk.first; p < chunk.end; ++p)
+        walkPath(p, [&](std::uint32_t cell) { ++chunk.offsets[cell + 1]; });
+    for (std::size_t c = 0; c < cells; ++c)
+        chunk.offsets[c + 1] += chunk.offsets[c];
+    marks.cursor.assign(chunk.offsets.begin(), chunk.offsets.end() - 1);
+    const std::size_t entries = chunk.offsets[cells];
+    if (entries > chunk.ids.capacity()) chunk.ids.reserve(entries + entries / 8); // not 2x
+    chunk.ids.resize(entries);
+    for (std::uint32_t p = chunk.first; p < chunk.end; ++p)
+        walkPath(p, [&](std::uint32_t cell) { chunk.ids[marks.cursor[cell]++] = p; });
+}
+
+void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::uint32_t resolution) {
+    QGI_ASSERT(!bounds.empty() && resolution > 0, "the path grid needs a box and cells");
+    // A margin keeps geometry on the box's faces strictly inside it.
+    const glm::vec3 margin = 0.01f * bounds.extent() + 1e-4f;
+    mBounds = {bounds.min - margin, bounds.max + margin};
+    const glm::vec3 extent = mBounds.extent();
+    mCellSize = std::max({extent.x, extent.y, extent.z}) / float(resolution);
+    mCells = glm::clamp(glm::ivec3(glm::ceil(extent / mCellSize)), glm::ivec3(1),
+                        glm::ivec3(int(resolution)));
+    mPathCount = store.pathCount();
+
+    // Chunks hold whole 64-bit words of the query bitmap, so queries mark them in parallel.
+    const std::size_t cells = cellCount() + 2;
+    mChunkPaths =
+        std::max(kChunkPaths, (mPathCount * cells + kMaxChunkOffsets - 1) / kMaxChunkOffsets);
+    mChunkPaths = (mChunkPaths + 63) / 64 * 64;
+    mChunks.resize((mPathCount + mChunkPaths - 1) / mChunkPaths); // keeps the lists' memory
+    for (std::size_t k = 0; k < mChunks.size(); ++k) {
+        mChunks[k].first = std::uint32_t(k * mChunkPaths);
+        mChunks[k].end = std::uint32_t(std::min(mPathCount, (k + 1) * mChunkPaths));
+        mChunks[k].changed = 0;
+    }
+    tbb::parallel_for(std::size_t(0), mChunks.size(),
+                      [&](std::size_t k) { indexChunk(store, mChunks[k]); });
+    mChangedSlot.assign(mPathCount, kUnchanged);
+    mChanged.clear();
+    mChangedExtent.clear();
+    mSeen.assign((mPathCount + 63) / 64, 0);
+}
+
+PhotonPathGrid::Extent PhotonPathGrid::extentOf(const PhotonStore& store, std::uint32_t p) const {
+    Extent extent;
+    const PhotonPath& path = store.paths[p];
+    for (std::size_t s = path.first; s < std::size_t(path.first) + path.count; ++s) {
+        const glm::vec3& o = store.segments.origin[s];
+        const glm::vec3& d = store.segments.direction[s];
+        const float length = store.segments.length[s];
+        const auto [near, far] = clipToBox(o, d, length, mBounds.min, mBounds.max);
+        if (near > 0.f || far < length) extent.outside = true;
+        if (near > far) continue;
+        extent.box.extend(o + near * d);
+        extent.box.extend(o + far * d);
+    }
+    return extent;
+}
+
+void PhotonPathGrid::markChanged(const PhotonStore& store, std::span<const std::uint32_t> paths) {
+    QGI_ASSERT(store.pathCount() == mPathCount, "the grid indexes another store");
+    for (const std::uint32_t p : paths) {
+        if (mChangedSlot[p] != kUnchanged) continue;
+        mChangedSlot[p] = std::uint32_t(mChanged.size());
+        mChanged.push_back(p);
+        mChangedExtent.emplace_back();
+        ++mChunks[p / mChunkPaths].changed;
+    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, paths.size(), kExtentGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i < range.end(); ++i)
+                              mChangedExtent[mChangedSlot[paths[i]]] = extentOf(store, paths[i]);
+                      });
+}
+
+std::size_t PhotonPathGrid::refresh(const PhotonStore& store, std::size_t budget,
+                                    std::size_t idleUpTo) {
+    if (mChanged.size() <= idleUpTo) return 0;
+    mPicked.clear();
+    for (std::uint32_t k = 0; k < mChunks.size(); ++k)
+        if (mChunks[k].changed > 0) mPicked.push_back(k);
+    std::stable_sort(mPicked.begin(), mPicked.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return mChunks[a].changed > mChunks[b].changed;
+    });
+    std::size_t take = 0, paths = 0;
+    for (; take < mPicked.size() && (take == 0 || paths < budget); ++take)
+        paths += mChunks[mPicked[take]].end - mChunks[mPicked[take]].first;
+    mPicked.resize(take);
+    tbb::parallel_for(std::size_t(0), take,
+                      [&](std::size_t i) { indexChunk(store, mChunks[mPicked[i]]); });
+    for (const std::uint32_t k : mPicked) {
+        Chunk& chunk = mChunks[k];
+        for (std::uint32_t p = chunk.first; p < chunk.end; ++p) {
+            const std::uint32_t slot = mChangedSlot[p];
+            if (slot == kUnchanged) continue;
+            const std::uint32_t last = mChanged.back();
+            mChanged[slot] = last;
+            mChangedExtent[slot] = mChangedExtent.back();
+            mChangedSlot[last] = slot;
+            mChanged.pop_back();
+            mChangedExtent.pop_back();
+            mChangedSlot[p] = kUnchanged;
+        }
+        chunk.changed = 0;
+    }
+    return paths;
+}
+
+void PhotonPathGrid::pathsOverlapping(const Aabb& box, std::vector<std::uint32_t>& out) const {
+    pathsOverlapping(std::span<const Aabb>(&box, 1), out);
+}
+
+void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
+                                      std::vector<std::uint32_t>& out) const {
+    out.clear();
+    if (mPathCount == 0) return;
+    const std::lock_guard lock(mQueryMutex);
+    const auto see = [&](std::uint32_t path) {
+        mSeen[path >> 6] |= std::uint64_t(1) << (path & 63);
+    };
+    // Widened by a sliver of a cell: the walk may put a point that lies within rounding
+    // distance of a cell face into the neighbouring cell.
+    const float widen = 1e-3f * mCellSize;
+    const glm::ivec3 top = mCells - 1;
+    const auto cellOf = [&](const glm::vec3& p) {
+        const glm::vec3 g =
+            glm::clamp((p - mBounds.min) / mCellSize, glm::vec3(-1.f), glm::vec3(mCells) + 1.f);
+        return glm::clamp(glm::ivec3(glm::floor(g)), glm::ivec3(0), top);
+    };
+    mQueries.clear();
+    for (const Aabb& box : boxes) {
+        if (box.empty()) continue;
+        Query& q = mQueries.emplace_back();
+        q.wide = {box.min - widen, box.max + widen};
+        q.outside = glm::any(glm::lessThan(q.wide.min, mBounds.min)) ||
+                    glm::any(glm::greaterThan(q.wide.max, mBounds.max));
+        q.lo = cellOf(q.wide.min);
+        q.hi = cellOf(q.wide.max);
+    }
+    // Chunks cover whole words of mSeen: one task per chunk, no two write the same word.
+    // Isolated: while it waits, this thread (holding the lock) must not pick up an outer
+    // task that queries again.
+    tbb::this_task_arena::isolate([&] {
+        tbb::parallel_for(std::size_t(0), mChunks.size(), [&](std::size_t k) {
+            const Chunk& chunk = mChunks[k];
+            const auto seeRange = [&](std::uint32_t firstCell, std::uint32_t endCell) {
+                for (std::uint32_t e = chunk.offsets[firstCell]; e < chunk.offsets[endCell]; ++e)
+                    see(chunk.ids[e]);
+            };
+            for (const Query& q : mQueries) {
+                for (int z = q.lo.z; z <= q.hi.z; ++z) // cells along x are consecutive: a row
+                    for (int y = q.lo.y; y <= q.hi.y; ++y)
+                        seeRange(cellIndex({q.lo.x, y, z}), cellIndex({q.hi.x, y, z}) + 1);
+                if (q.outside) seeRange(outsideCell(), outsideCell() + 1);
+            }
+        });
+    });
+    for (std::size_t i = 0; i < mChanged.size(); ++i)
+        for (const Query& q : mQueries)
+            if ((q.outside && mChangedExtent[i].outside) ||
+                overlaps(mChangedExtent[i].box, q.wide)) {
+                see(mChanged[i]);
+                break;
+            }
+    for (std::size_t w = 0; w < mSeen.size(); ++w) {
+        for (std::uint64_t bits = mSeen[w]; bits != 0; bits &= bits - 1)
+            out.push_back(std::uint32_t(w * 64 + std::size_t(std::countr_zero(bits))));
+        mSeen[w] = 0;
+    }
+}
+
+std::size_t PhotonPathGrid::entryCount() const {
+    std::size_t entries = 0;
+    for (const Chunk& chunk : mChunks)
+        entries += chunk.ids.size();
+    return entries;
+}
+
+std::size_t PhotonPathGrid::memoryBytes() const {
+    std::size_t bytes = mChangedSlot.capacity() * sizeof(std::uint32_t) +
+                        mChanged.capacity() * sizeof(std::uint32_t) +
+                        mChangedExtent.capacity() * sizeof(Extent) +
+                        mSeen.capacity() * sizeof(std::uint64_t);
+    for (const Chunk& chunk : mChunks)
+        bytes += (chunk.offsets.capacity() + chunk.ids.capacity()) * sizeof(std::uint32_t);
+    for (const Marks& marks : mMarks)
+        bytes += (marks.mark.capacity() + marks.cursor.capacity()) * sizeof(std::uint32_t);
+    return bytes;
+}
+
+} // namespace qgi

@@ -1,0 +1,127 @@
+#pragma once
+
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonStore.h"
+
+#include <glm/vec3.hpp>
+#include <oneapi/tbb/enumerable_thread_specific.h>
+
+#include <cstdint>
+#include <mutex>
+#include <span>
+#include <vector>
+
+namespace qgi {
+
+/** World resource: which photon paths pass through which part of space, so that finding the
+ *  paths a moved mobile may touch costs in proportion to the paths near it, not to the ray set.
+ *
+ *  A uniform grid of cubic cells over the scene box (enlarged by a margin); each cell lists
+ *  the paths with a segment crossing it (a 3D-DDA walk of each segment, one entry per path and
+ *  cell). One more cell stands for everything outside the box: it lists the paths with a
+ *  segment reaching beyond it (escaping photons, light from outside), and a query box that is
+ *  not inside the grid gets it too, so queries are supersets anywhere in space.
+ *
+ *  Re-traced paths: walking a re-traced path's old and new cells every frame costs more than
+ *  re-tracing it, so a path that changes is only marked *changed*, with the bounding box of
+ *  its new segments: queries return it when its box overlaps, whatever the cells say. The
+ *  paths are indexed in fixed chunks (consecutive path ids, each chunk its own cell lists);
+ *  refresh() re-indexes the chunks holding the most of them within a per-frame budget, and
+ *  their paths become unchanged again. No frame ever rebuilds the whole grid.
+ *
+ *  Memory: 4 bytes per (path, cell) entry; 4 bytes per cell and chunk (chunks are sized so
+ *  that this stays below 64 MiB); 32 bytes per changed path and 4 per path; one bit per path
+ *  and 4 bytes per cell and thread of working marks. Queries are thread safe (they serialise
+ *  on a mutex); build, markChanged and refresh are not.                                      */
+class PhotonPathGrid {
+public:
+    /// Indexes every path of `store` over `bounds` with `resolution` cells along its longest
+    /// axis. Parallel.
+    void build(const PhotonStore& store, const Aabb& bounds, std::uint32_t resolution);
+
+    /// Marks `paths` changed (their segments in `store` are new): until their chunk is
+    /// re-indexed, queries test them by the bounding box of their current segments.
+    void markChanged(const PhotonStore& store, std::span<const std::uint32_t> paths);
+
+    /// When more than `idleUpTo` paths are changed, re-indexes the chunks with the most
+    /// changed paths, about `budget` paths in all (at least one chunk). Parallel. Returns the
+    /// paths re-indexed.
+    std::size_t refresh(const PhotonStore& store, std::size_t budget, std::size_t idleUpTo);
+
+    /// Every path that may have a segment intersecting `box` (a superset), each once, in
+    /// increasing order; replaces the contents of `out`.
+    void pathsOverlapping(const Aabb& box, std::vector<std::uint32_t>& out) const;
+    /// The same for the union of several boxes.
+    void pathsOverlapping(std::span<const Aabb> boxes, std::vector<std::uint32_t>& out) const;
+
+    const Aabb& bounds() const { return mBounds; }
+    glm::ivec3 resolution() const { return mCells; }
+    float cellSize() const { return mCellSize; }
+    std::size_t pathCount() const { return mPathCount; }
+    std::size_t changedPathCount() const { return mChanged.size(); }
+    std::size_t entryCount() const;
+    std::size_t memoryBytes() const;
+
+private:
+    /// Paths [first, end) with their own cell lists: cell c's paths are
+    /// ids[offsets[c], offsets[c + 1]), in increasing order.
+    struct Chunk {
+        std::uint32_t first = 0, end = 0;
+        std::uint32_t changed = 0; ///< of its paths, how many are marked changed
+        std::vector<std::uint32_t> offsets;
+        std::vector<std::uint32_t> ids;
+    };
+    /// One thread's scratch for walking paths.
+    struct Marks {
+        std::vector<std::uint32_t> mark; ///< per cell: token of the last path that saw it
+        std::vector<std::uint32_t> cursor;
+        std::uint32_t token = 0;
+        std::uint32_t nextToken();
+    };
+    /// A query box, widened, with its range of cells.
+    struct Query {
+        Aabb wide;
+        glm::ivec3 lo{0}, hi{0};
+        bool outside = false; ///< reaches beyond the grid box
+    };
+    /// A changed path's segments' extent: clipped to the grid box, plus whether any part of
+    /// them lies outside it.
+    struct Extent {
+        Aabb box;
+        bool outside = false;
+    };
+
+    template <typename Fn>
+    void forEachCell(const PhotonSegments& segments, std::size_t first, std::size_t count,
+                     Fn&& fn) const;
+    template <typename Fn> void walkLine(const glm::vec3& a, const glm::vec3& b, Fn& fn) const;
+    void indexChunk(const PhotonStore& store, Chunk& chunk) const;
+    Extent extentOf(const PhotonStore& store, std::uint32_t path) const;
+    std::uint32_t cellIndex(const glm::ivec3& c) const {
+        return std::uint32_t((c.z * mCells.y + c.y) * mCells.x + c.x);
+    }
+    /// Cells of the box; the outside cell comes after them.
+    std::size_t cellCount() const { return std::size_t(mCells.x) * mCells.y * mCells.z; }
+    std::uint32_t outsideCell() const { return std::uint32_t(cellCount()); }
+    Marks& localMarks() const;
+
+    static constexpr std::uint32_t kUnchanged = 0xffffffffu;
+
+    Aabb mBounds;
+    glm::ivec3 mCells{0};
+    float mCellSize = 1.f;
+    std::size_t mPathCount = 0;
+    std::size_t mChunkPaths = 1;
+    std::vector<Chunk> mChunks;
+    std::vector<std::uint32_t> mChangedSlot; ///< per path: its index in mChanged, or kUnchanged
+    std::vector<std::uint32_t> mChanged;     ///< the changed paths
+    std::vector<Extent> mChangedExtent;      ///< and their extents
+    std::vector<std::uint32_t> mPicked;      ///< refresh's working list of chunks
+
+    mutable tbb::enumerable_thread_specific<Marks> mMarks;
+    mutable std::mutex mQueryMutex;
+    mutable std::vector<std::uint64_t> mSeen; ///< one bit per path, clear between queries
+    mutable std::vector<Query> mQueries;
+};
+
+} // namespace qgi

@@ -1,0 +1,40 @@
+#include "systems/photon_update/PhotonSettings.h"
+
+#include "runtime/core/Error.h"
+
+namespace qgi {
+namespace {
+
+// Segment indices are 32-bit (PhotonPath::first). Between compactions the store holds up to
+// (1 + compactionFraction) times the live segments plus one frame of re-traced paths, so the
+// worst case (every photon reaching maxBounces) must fit four times over.
+constexpr std::uint64_t kMaxStoredSegments = std::uint64_t(1) << 30;
+constexpr std::uint32_t kMaxBounces = 255; // PhotonSegments::bounce is 8 bits
+constexpr std::uint32_t kMaxGridResolution = 128;
+
+void checkFraction(float value, const char* field, float max) {
+    if (!(value > 0.f && value <= max)) // NaN fails too
+        fail("PhotonSettings.", field, " = ", value, " is not in (0, ", max, "]");
+}
+
+} // namespace
+
+void validatePhotonSettings(const PhotonSettings& s) {
+    if (s.maxBounces > kMaxBounces)
+        fail("PhotonSettings.maxBounces = ", s.maxBounces, " is not in [0, ", kMaxBounces, "]");
+    const std::uint64_t maxPhotons = kMaxStoredSegments / (std::uint64_t(s.maxBounces) + 1);
+    if (s.photonCount == 0 || s.photonCount > maxPhotons)
+        fail("PhotonSettings.photonCount = ", s.photonCount, " is not in [1, ", maxPhotons,
+             "] (the limit for maxBounces = ", s.maxBounces, ")");
+    if (s.reshootBudget == 0) fail("PhotonSettings.reshootBudget = 0: moved lights never refresh");
+    if (s.gridResolution == 0 || s.gridResolution > kMaxGridResolution)
+        fail("PhotonSettings.gridResolution = ", s.gridResolution, " is not in [1, ",
+             kMaxGridResolution, "]");
+    if (s.gridRefreshBudget == 0)
+        fail("PhotonSettings.gridRefreshBudget = 0: the path index would never catch up");
+    checkFraction(s.compactionFraction, "compactionFraction", 1.f);
+    if (!s.punctualLights && !s.emissiveSurfaces)
+        fail("PhotonSettings: punctualLights and emissiveSurfaces are both off: nothing emits");
+}
+
+} // namespace qgi

@@ -1,0 +1,46 @@
+#pragma once
+
+#include <cstdint>
+
+namespace qgi {
+
+/// How the photon update system shoots, keeps and refreshes the photon ray set.
+/// `validatePhotonSettings` (called by the system's constructor) rejects absurd values.
+struct PhotonSettings {
+    /// Photons emitted in all, shared among the lights in proportion to their power (the sum
+    /// of the RGB watts). Each photon is one stored path.
+    std::uint32_t photonCount = 200'000;
+    /// Seeds every random choice: the quasi-random emission's scrambling and the per-bounce
+    /// hash. Same seed, same scene: a bit-identical ray set.
+    std::uint64_t seed = 1;
+    /// Reflections a photon may make; the path ends at the hit after the last one. Russian
+    /// roulette ends almost every path long before: with albedo 0.8 only 0.8^32 = 0.08 % of
+    /// the power is cut off at 32.
+    std::uint32_t maxBounces = 32;
+    /// Photons re-shot per frame for lights that moved or changed (progressive refinement,
+    /// seed 004 section 7.4), shared among the lights that have photons left to refresh.
+    std::uint32_t reshootBudget = 20'000;
+    /// Cells of the path index (PhotonPathGrid) along the longest axis of the scene box.
+    /// Finer cells give fewer candidate paths per moved mobile but more index entries (memory,
+    /// and time to re-index a path).
+    std::uint32_t gridResolution = 32;
+    /// Paths the index re-indexes per frame once re-traced paths pass 1/64 of all (whole
+    /// chunks, those with the most re-traced paths first); until then a re-traced path is
+    /// found by its bounding box.
+    std::uint32_t gridRefreshBudget = 4096;
+    /// The store is compacted when its garbage segments (left by re-traced paths that no longer
+    /// fit their old range) exceed this fraction of the live ones.
+    float compactionFraction = 0.5f;
+    /// Re-shoot every photon every frame (PhotonDelta::full): the baseline to compare against.
+    bool fullRecompute = false;
+    /// Emitters: point, spot and directional lights; triangles whose Material emits.
+    /// A scene that models one lamp both ways (the cornell box's luminaire and its punctual
+    /// stand-in for hybrid mode) must enable only one of them or the lamp counts twice.
+    bool punctualLights = true;
+    bool emissiveSurfaces = true;
+};
+
+/// Throws qgi::Error naming the field when a setting is out of its range.
+void validatePhotonSettings(const PhotonSettings& settings);
+
+} // namespace qgi

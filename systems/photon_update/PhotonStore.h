@@ -1,0 +1,94 @@
+#pragma once
+
+#include "runtime/ecs/Entity.h"
+#include "runtime/scene/SceneInfo.h"
+
+#include <glm/vec3.hpp>
+
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <vector>
+
+namespace qgi {
+
+/// Path segments as a structure of arrays. Segment s of the store is
+/// `origin[s] + t * direction[s]` for t in [0, length[s]]; it carries `power[s]` watts.
+/// A segment that leaves the scene has length = +inf and a null hitEntity: DETP counts rays
+/// that cross a disc and hit nothing, so those are stored too.
+struct PhotonSegments {
+    std::vector<glm::vec3> origin;           ///< metres, world space
+    std::vector<glm::vec3> direction;        ///< unit, world space
+    std::vector<float> length;               ///< metres to the hit; +inf: left the scene
+    std::vector<glm::vec3> power;            ///< W, linear RGB, carried along the segment
+    std::vector<Entity> hitEntity;           ///< mesh entity hit; null: left the scene
+    std::vector<std::uint32_t> hitPrimitive; ///< triangle index in the entity's Mesh
+    std::vector<std::uint8_t> bounce;        ///< 0: leaves the light; k: after k reflections
+
+    /// Bytes one segment occupies across the arrays (the SoA row): 53.
+    static constexpr std::size_t kBytesPerSegment = 3 * sizeof(glm::vec3) + sizeof(float) +
+                                                    sizeof(Entity) + sizeof(std::uint32_t) +
+                                                    sizeof(std::uint8_t);
+
+    std::size_t size() const { return origin.size(); }
+    void clear();
+    void reserve(std::size_t n);
+    void resize(std::size_t n);
+    /// Appends segment `s` of `from`.
+    void appendFrom(const PhotonSegments& from, std::size_t s);
+    /// Overwrites segments [to, to + count) with segments [first, first + count) of `from`
+    /// (already sized; `from` may be this object when the ranges do not overlap).
+    void copyFrom(std::size_t to, const PhotonSegments& from, std::size_t first, std::size_t count);
+};
+
+/// One photon's path: segments [first, first + count) of PhotonStore::segments.
+struct PhotonPath {
+    std::uint32_t first = 0;
+    std::uint16_t count = 0;
+    std::uint16_t light = 0; ///< index into PhotonStore::lights
+};
+
+/// An emitter as the photon tracer saw it when it shot (for bookkeeping and tests).
+struct PhotonLight {
+    Entity entity;
+    glm::vec3 power{0.f}; ///< W emitted, linear RGB
+    std::uint32_t photonCount = 0;
+};
+
+/** World resource: the stored photon ray set (seed 000 section 2.2).
+ *  Photon i's path is `paths[i]`; its segments are contiguous in `segments`. A re-traced path
+ *  is rewritten in place when it fits its old range, otherwise written to new storage; what
+ *  it leaves behind is garbage, reclaimed by compaction, so segment indices are not stable
+ *  across frames: refer to segments as (path, k).
+ *  Written by PhotonUpdateSystem only; everything else reads it.                         */
+struct PhotonStore {
+    PhotonSegments segments;
+    std::vector<PhotonPath> paths; ///< one per emitted photon, index = photon index
+    std::vector<PhotonLight> lights;
+    glm::vec3 emittedPower{0.f};  ///< sum of lights[].power, W
+    std::uint64_t generation = 0; ///< bumped whenever the whole set is re-shot
+
+    std::size_t pathCount() const { return paths.size(); }
+    std::size_t segmentIndex(std::uint32_t path, std::uint32_t k) const {
+        return std::size_t(paths[path].first) + k;
+    }
+};
+
+/** This frame's change to the ray set (seed 000 sections 2.3-2.4): for each affected path,
+ *  the suffix it had before (from its first affected segment on) and the suffix it has now.
+ *  The head segments of an old and a new suffix share origin, direction and power.
+ *  `full` means the whole set was (re)built this frame: consumers re-estimate everything.   */
+struct PhotonDelta {
+    bool full = false;
+    std::vector<std::uint32_t> paths;    ///< affected path (photon) indices
+    PhotonSegments oldSegments;          ///< concatenated old suffixes
+    PhotonSegments newSegments;          ///< concatenated new suffixes
+    std::vector<std::uint32_t> oldFirst; ///< per affected path: start in oldSegments (+1 entry)
+    std::vector<std::uint32_t> newFirst; ///< per affected path: start in newSegments (+1 entry)
+    std::vector<Entity> movedMobiles;    ///< the mobiles whose move caused the change
+
+    bool empty() const { return !full && paths.empty(); }
+    void clear();
+};
+
+} // namespace qgi

@@ -1,0 +1,139 @@
+#include "systems/photon_update/PhotonTracer.h"
+
+#include "runtime/core/Error.h"
+#include "runtime/raytrace/RayScene.h"
+#include "systems/photon_update/PhotonSampling.h"
+
+#include <oneapi/tbb/parallel_for.h>
+
+#include <algorithm>
+#include <limits>
+
+namespace qgi {
+namespace {
+
+// Paths per block: enough live rays for full 8-wide packets over several bounces; a round of
+// blocks is traced in parallel, then appended in order (deterministic layout).
+constexpr std::size_t kMaxBlockPaths = 256;
+constexpr std::size_t kMinBlockPaths = 32;
+constexpr std::size_t kBlocksPerRound = 32;
+
+/// Continues photon `h` after `hit`: Russian roulette, then the reflected ray. False when the
+/// path ends here.
+bool reflect(const PhotonTracer::Surfaces& surfaces, const Hit& hit, PhotonHead& h) {
+    if (h.bounce >= surfaces.maxBounces) return false;
+    const std::uint32_t index = hit.entity.index;
+    const glm::vec3 albedo =
+        index < surfaces.albedo.size() ? surfaces.albedo[index] : glm::vec3(0.f);
+    const float survival = std::max({albedo.x, albedo.y, albedo.z});
+    const std::uint64_t key = photon::mixBits(surfaces.seed);
+    if (!(photon::hashUniform(key, h.photon, h.bounce, 0) < survival)) return false;
+    h.power *= albedo / survival;
+    const glm::vec3 facing = glm::dot(hit.normal, h.direction) > 0.f ? -hit.normal : hit.normal;
+    const glm::vec3 point = h.origin + hit.t * h.direction;
+    h.direction =
+        photon::sampleCosine(photon::Frame(facing), photon::hashUniform(key, h.photon, h.bounce, 1),
+                             photon::hashUniform(key, h.photon, h.bounce, 2));
+    h.origin = photon::offsetFromSurface(point, facing);
+    ++h.bounce;
+    return true;
+}
+
+} // namespace
+
+void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, std::size_t begin,
+                              std::size_t end, const HeadFn& head, Block& out) {
+    Scratch& s = mScratch.local();
+    const std::size_t n = end - begin;
+    const std::size_t slotsPerPath = std::size_t(surfaces.maxBounces) + 1;
+    s.state.resize(n);
+    s.active.resize(n);
+    s.rays.resize(n);
+    s.hits.resize(n);
+    out.counts.assign(n, 0);
+    if (out.slots.size() < n * slotsPerPath) out.slots.resize(n * slotsPerPath);
+    for (std::size_t i = 0; i < n; ++i) {
+        s.state[i] = head(begin + i);
+        s.active[i] = std::uint32_t(i);
+    }
+
+    PhotonSegments& slots = out.slots;
+    std::size_t live = n;
+    while (live > 0) {
+        for (std::size_t j = 0; j < live; ++j) {
+            const PhotonHead& h = s.state[s.active[j]];
+            s.rays[j] = Ray{h.origin, 0.f, h.direction, std::numeric_limits<float>::infinity()};
+        }
+        scene.intersect(std::span<const Ray>(s.rays.data(), live),
+                        std::span<std::optional<Hit>>(s.hits.data(), live));
+        std::size_t next = 0;
+        for (std::size_t j = 0; j < live; ++j) {
+            const std::uint32_t i = s.active[j];
+            PhotonHead& h = s.state[i];
+            // Bounce-major slots: a wavefront's writes land close together.
+            const std::size_t slot = std::size_t(out.counts[i]++) * n + i;
+            slots.origin[slot] = h.origin;
+            slots.direction[slot] = h.direction;
+            slots.power[slot] = h.power;
+            slots.bounce[slot] = h.bounce;
+            const std::optional<Hit>& hit = s.hits[j];
+            if (!hit) {
+                slots.length[slot] = std::numeric_limits<float>::infinity();
+                slots.hitEntity[slot] = kNullEntity;
+                slots.hitPrimitive[slot] = 0;
+                continue;
+            }
+            slots.length[slot] = hit->t;
+            slots.hitEntity[slot] = hit->entity;
+            slots.hitPrimitive[slot] = hit->primitive;
+            if (reflect(surfaces, *hit, h)) s.active[next++] = i;
+        }
+        live = next;
+    }
+}
+
+void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::size_t count,
+                         const HeadFn& head, PhotonSegments& out,
+                         std::vector<std::uint32_t>& ends) {
+    // Small jobs (a frame's re-traced paths) still split into a few blocks per thread.
+    const std::size_t blockPaths =
+        std::clamp(count / kBlocksPerRound, kMinBlockPaths, kMaxBlockPaths);
+    QGI_ASSERT(!ends.empty() && ends.back() == out.size(), "ends must end with out.size()");
+    if (mBlocks.size() < kBlocksPerRound) mBlocks.resize(kBlocksPerRound);
+    ends.reserve(ends.size() + count);
+    for (std::size_t round = 0; round < count; round += blockPaths * kBlocksPerRound) {
+        const std::size_t roundEnd = std::min(count, round + blockPaths * kBlocksPerRound);
+        const std::size_t blocks = (roundEnd - round + blockPaths - 1) / blockPaths;
+        tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+            const std::size_t begin = round + b * blockPaths;
+            traceBlock(scene, surfaces, begin, std::min(roundEnd, begin + blockPaths), head,
+                       mBlocks[b]);
+        });
+        // Where each block's paths go, then the copies, block by block in parallel.
+        const std::size_t firstEnd = ends.size();
+        for (std::size_t b = 0; b < blocks; ++b)
+            for (const std::uint32_t c : mBlocks[b].counts)
+                ends.push_back(ends.back() + c);
+        out.resize(ends.back());
+        tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+            const Block& block = mBlocks[b];
+            const std::size_t n = block.counts.size();
+            const std::size_t first = firstEnd + b * blockPaths;
+            const PhotonSegments& from = block.slots;
+            for (std::size_t i = 0; i < n; ++i)
+                for (std::size_t k = 0, to = ends[first + i] - block.counts[i]; k < block.counts[i];
+                     ++k, ++to) {
+                    const std::size_t s = k * n + i;
+                    out.origin[to] = from.origin[s];
+                    out.direction[to] = from.direction[s];
+                    out.length[to] = from.length[s];
+                    out.power[to] = from.power[s];
+                    out.hitEntity[to] = from.hitEntity[s];
+                    out.hitPrimitive[to] = from.hitPrimitive[s];
+                    out.bounce[to] = from.bounce[s];
+                }
+        });
+    }
+}
+
+} // namespace qgi

@@ -1,0 +1,483 @@
+#include "systems/photon_update/PhotonUpdateSystem.h"
+
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Log.h"
+#include "runtime/raytrace/RayScene.h"
+#include "systems/photon_update/PhotonPathGrid.h"
+#include "systems/photon_update/PhotonStore.h"
+
+#include <glm/common.hpp>
+#include <glm/matrix.hpp>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace qgi {
+namespace {
+
+constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); // PhotonPath::light
+constexpr std::size_t kTestGrain = 256;       // candidate paths per task
+constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
+constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 changed paths
+
+glm::vec3 albedoOf(const Material* material) {
+    const glm::vec3 albedo = material ? material->baseColor : Material{}.baseColor;
+    glm::vec3 out;
+    for (int c = 0; c < 3; ++c) // NaN fails every comparison: it becomes 0, black
+        out[c] = albedo[c] > 0.f ? std::min(albedo[c], 1.f) : 0.f;
+    return out;
+}
+
+bool isTraced(const Registry& registry, Entity e) {
+    return registry.has<StaticMesh>(e) || registry.has<MobileMesh>(e);
+}
+
+Aabb transformBox(const Aabb& box, const glm::mat4& m) {
+    Aabb out;
+    for (int i = 0; i < 8; ++i)
+        out.extend(
+            glm::vec3(m * glm::vec4(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y,
+                                    i & 4 ? box.max.z : box.min.z, 1.f)));
+    return out;
+}
+
+/// The box widened past rounding (of transformed corners, of rays mapped to object space),
+/// so that testing segments against it never rejects one that touches what it bounds.
+Aabb widened(const Aabb& box) {
+    const glm::vec3 pad = 1e-4f * (glm::abs(box.min) + glm::abs(box.max) + box.extent()) + 1e-6f;
+    return {box.min - pad, box.max + pad};
+}
+
+/// Whether origin + t * direction meets the box for some t in [0, length] (slab test).
+bool segmentMeetsBox(const glm::vec3& origin, const glm::vec3& direction, float length,
+                     const Aabb& box) {
+    float near = 0.f, far = length;
+    for (int axis = 0; axis < 3; ++axis) {
+        if (direction[axis] == 0.f) {
+            if (origin[axis] < box.min[axis] || origin[axis] > box.max[axis]) return false;
+            continue;
+        }
+        const float inverse = 1.f / direction[axis];
+        float t0 = (box.min[axis] - origin[axis]) * inverse;
+        float t1 = (box.max[axis] - origin[axis]) * inverse;
+        if (t0 > t1) std::swap(t0, t1);
+        near = std::max(near, t0);
+        far = std::min(far, t1);
+        if (near > far) return false;
+    }
+    return true;
+}
+
+/// Photon counts in proportion to each light's power (the sum of its RGB watts), summing to
+/// `photons`: largest remainders, so every count is within one of its exact share.
+void allocatePhotons(std::vector<PhotonEmitter>& emitters, std::uint32_t photons) {
+    double total = 0.0;
+    for (const PhotonEmitter& e : emitters)
+        total += double(e.power.x) + e.power.y + e.power.z;
+    std::vector<std::pair<double, std::size_t>> remainders;
+    std::uint64_t given = 0;
+    for (std::size_t i = 0; i < emitters.size(); ++i) {
+        const PhotonEmitter& e = emitters[i];
+        const double share =
+            total > 0.0 ? photons * ((double(e.power.x) + e.power.y + e.power.z) / total) : 0.0;
+        emitters[i].photonCount = std::uint32_t(std::floor(share));
+        given += emitters[i].photonCount;
+        if (share > 0.0) remainders.emplace_back(share - std::floor(share), i);
+    }
+    // Ties go to the earlier light: the order is fixed, so the allocation is deterministic.
+    std::stable_sort(remainders.begin(), remainders.end(),
+                     [](const auto& a, const auto& b) { return a.first > b.first; });
+    for (std::size_t r = 0; given < photons && r < remainders.size(); ++r, ++given)
+        ++emitters[remainders[r].second].photonCount;
+    std::uint32_t first = 0;
+    for (PhotonEmitter& e : emitters) {
+        e.firstPhoton = first;
+        first += e.photonCount;
+    }
+}
+
+bool shines(const glm::vec3& power) {
+    return power.x > 0.f || power.y > 0.f || power.z > 0.f;
+}
+
+void setBit(std::vector<std::uint64_t>& bits, std::uint32_t i, bool value) {
+    const std::uint64_t mask = std::uint64_t(1) << (i & 63);
+    bits[i >> 6] = value ? bits[i >> 6] | mask : bits[i >> 6] & ~mask;
+}
+
+bool testBit(const std::vector<std::uint64_t>& bits, std::uint32_t i) {
+    return (bits[i >> 6] >> (i & 63)) & 1;
+}
+
+} // namespace
+
+PhotonUpdateSystem::PhotonUpdateSystem(const PhotonSettings& settings) : mSettings(settings) {
+    validatePhotonSettings(settings);
+}
+
+std::size_t PhotonUpdateSystem::capacityFor(std::size_t live) const {
+    // The garbage allowed before compaction, and an eighth more for the frame that passes
+    // it: appending re-traced paths must not reallocate (and so copy) the whole store.
+    return std::size_t(double(live) * (1.125 + mSettings.compactionFraction));
+}
+
+PhotonTracer::Surfaces PhotonUpdateSystem::surfaces() const {
+    return {mSettings.seed, mSettings.maxBounces, mAlbedo};
+}
+
+void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*/) {
+    Context& ctx = registry.ctx();
+    const RayScene* scene = ctx.find<RayScene>();
+    QGI_ASSERT(scene, "PhotonUpdateSystem needs the RayScene world resource");
+    PhotonStore& store =
+        ctx.contains<PhotonStore>() ? ctx.get<PhotonStore>() : ctx.emplace<PhotonStore>();
+    PhotonDelta& delta =
+        ctx.contains<PhotonDelta>() ? ctx.get<PhotonDelta>() : ctx.emplace<PhotonDelta>();
+    PhotonPathGrid& grid =
+        ctx.contains<PhotonPathGrid>() ? ctx.get<PhotonPathGrid>() : ctx.emplace<PhotonPathGrid>();
+    delta.clear();
+    mStats = {};
+
+    mSources.clear();
+    findEmitterSources(registry, mSettings, mSources);
+    if (mShot) findMovedMobiles(registry, *scene, delta);
+    if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store) ||
+        albedoChanged(registry)) {
+        shootAll(registry, *scene, store, grid);
+        delta.full = true;
+        return;
+    }
+
+    scheduleReshoots();
+    findAffectedPaths(*scene, store, grid);
+    if (!mJobs.empty()) {
+        retrace(*scene, store, delta);
+        grid.markChanged(store, delta.paths);
+        const std::size_t live = store.segments.size() - mGarbage;
+        if (double(mGarbage) > double(mSettings.compactionFraction) * double(live)) {
+            compact(store);
+            mStats.compacted = true;
+        }
+    }
+    // Also on still frames: the index catches up with earlier changes. While few paths are
+    // changed it idles: queries scan their boxes cheaply, and paths near a moving mobile
+    // would change again anyway.
+    mStats.reindexedPaths =
+        grid.refresh(store, mSettings.gridRefreshBudget, store.pathCount() / kIdleChangedRatio);
+}
+
+bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store) {
+    if (std::min(mSources.size(), kMaxLights) != mEmitters.size()) return true;
+    for (std::size_t i = 0; i < mEmitters.size(); ++i)
+        if (mSources[i].kind != mEmitters[i].kind || mSources[i].entity != mEmitters[i].entity)
+            return true;
+    bool changed = false;
+    for (std::size_t i = 0; i < mEmitters.size(); ++i) {
+        PhotonEmitter& shot = mEmitters[i];
+        if (mSources[i].sameSource(shot)) continue;
+        PhotonEmitter edited = mSources[i]; // a source only: nothing derived to copy yet
+        edited.firstPhoton = shot.firstPhoton;
+        edited.photonCount = shot.photonCount;
+        prepareEmitter(registry, mSceneBox, edited);
+        // A light turning on or off changes how photons are shared: shoot everything anew.
+        if (shines(edited.power) != shines(shot.power)) return true;
+        shot = std::move(edited);
+        mSweeps[i].remaining = shot.photonCount;
+        store.lights[i].power = shot.power;
+        changed = true;
+    }
+    if (changed) {
+        store.emittedPower = glm::vec3(0.f);
+        for (const PhotonLight& light : store.lights)
+            store.emittedPower += light.power;
+    }
+    return false;
+}
+
+bool PhotonUpdateSystem::albedoChanged(const Registry& registry) const {
+    for (const Entity e : registry.changed<Material>()) {
+        if (e.index >= mAlbedo.size() || !registry.alive(e) || !isTraced(registry, e)) continue;
+        if (albedoOf(registry.tryGet<Material>(e)) != mAlbedo[e.index]) return true;
+    }
+    return false;
+}
+
+void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& scene) {
+    mSceneBox = {};
+    registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
+        [&](const StaticMesh&, const Mesh& mesh, const WorldTransform& world) {
+            for (const glm::vec3& p : mesh.positions)
+                mSceneBox.extend(glm::vec3(world.matrix * glm::vec4(p, 1.f)));
+        });
+    mMobiles.clear();
+    mMobileIndex.clear();
+    registry.view<const MobileMesh, const Mesh>().each(
+        [&](Entity e, const MobileMesh&, const Mesh& mesh) {
+            if (!scene.isMobile(e)) return;
+            Mobile mobile{e, {}, scene.mobilePose(e)};
+            for (const glm::vec3& p : mesh.positions)
+                mobile.objectBounds.extend(p);
+            mSceneBox.extend(transformBox(mobile.objectBounds, mobile.pose));
+            mMobileIndex.emplace(e, mMobiles.size());
+            mMobiles.push_back(mobile);
+        });
+    if (mSceneBox.empty()) mSceneBox = {glm::vec3(-1.f), glm::vec3(1.f)};
+}
+
+void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scene,
+                                  PhotonStore& store, PhotonPathGrid& grid) {
+    if (!mShot) captureScene(registry, scene);
+    mShot = true;
+    mStats.full = true;
+
+    // Lights: an unchanged light keeps what was derived from it (no work, no repeated warning).
+    if (mSources.size() > kMaxLights) {
+        logWarning("photons: ", mSources.size(), " lights; only the first ", kMaxLights, " shoot");
+        mSources.resize(kMaxLights);
+    }
+    for (std::size_t i = 0; i < mSources.size(); ++i) {
+        if (i < mEmitters.size() && mSources[i].sameSource(mEmitters[i]))
+            mSources[i] = std::move(mEmitters[i]);
+        else
+            prepareEmitter(registry, mSceneBox, mSources[i]);
+    }
+    std::swap(mEmitters, mSources);
+    allocatePhotons(mEmitters, mSettings.photonCount);
+    mSweeps.assign(mEmitters.size(), Sweep{});
+
+    mAlbedo.clear();
+    registry.view<const Mesh>().each([&](Entity e, const Mesh&) {
+        if (!isTraced(registry, e)) return;
+        if (e.index >= mAlbedo.size()) mAlbedo.resize(e.index + 1, glm::vec3(0.f));
+        mAlbedo[e.index] = albedoOf(registry.tryGet<Material>(e));
+    });
+
+    store.lights.clear();
+    store.emittedPower = glm::vec3(0.f);
+    store.paths.clear();
+    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
+        const PhotonEmitter& e = mEmitters[l];
+        store.lights.push_back({e.entity, e.power, e.photonCount});
+        store.emittedPower += e.power;
+        store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
+    }
+    ++store.generation;
+
+    store.segments.clear();
+    mEnds.assign(1, 0);
+    mTracer.trace(
+        scene, surfaces(), store.paths.size(),
+        [&](std::size_t i) {
+            return emitPhoton(mEmitters[store.paths[i].light], std::uint32_t(i), mSettings.seed);
+        },
+        store.segments, mEnds);
+    for (std::size_t i = 0; i < store.paths.size(); ++i) {
+        store.paths[i].first = mEnds[i];
+        store.paths[i].count = std::uint16_t(mEnds[i + 1] - mEnds[i]);
+    }
+    store.segments.reserve(capacityFor(store.segments.size()));
+    mGarbage = 0;
+    mReshooting.assign((store.paths.size() + 63) / 64, 0);
+    grid.build(store, mSceneBox, mSettings.gridResolution);
+    mStats.tracedSegments = store.segments.size();
+    mStats.reindexedPaths = store.paths.size();
+}
+
+void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RayScene& scene,
+                                          PhotonDelta& delta) {
+    mMoved.clear();
+    for (const Entity e : registry.changed<WorldTransform>()) {
+        const auto it = mMobileIndex.find(e);
+        if (it == mMobileIndex.end() || !scene.isMobile(e)) continue;
+        Mobile& mobile = mMobiles[it->second];
+        const glm::mat4& pose = scene.mobilePose(e);
+        if (pose == mobile.pose) continue; // also skips an entity listed twice
+        mMoved.push_back({e, pose, glm::inverse(pose), widened(mobile.objectBounds),
+                          widened(transformBox(mobile.objectBounds, mobile.pose)),
+                          widened(transformBox(mobile.objectBounds, pose))});
+        mobile.pose = pose;
+        delta.movedMobiles.push_back(e);
+    }
+    mStats.movedMobiles = mMoved.size();
+}
+
+void PhotonUpdateSystem::scheduleReshoots() {
+    mJobs.clear();
+    std::uint32_t budget = mSettings.reshootBudget;
+    std::size_t pending = 0;
+    for (const Sweep& sweep : mSweeps)
+        pending += sweep.remaining > 0 ? 1 : 0;
+    // Shares of what is left, evenly among the lights still sweeping; each pass hands out at
+    // least one photon per pending light, so the loop ends.
+    while (budget > 0 && pending > 0) {
+        const std::uint32_t share = std::max<std::uint32_t>(1, budget / std::uint32_t(pending));
+        pending = 0;
+        for (std::size_t l = 0; l < mSweeps.size() && budget > 0; ++l) {
+            Sweep& sweep = mSweeps[l];
+            if (sweep.remaining == 0) continue;
+            const PhotonEmitter& emitter = mEmitters[l];
+            const std::uint32_t take = std::min({share, sweep.remaining, budget});
+            for (std::uint32_t t = 0; t < take; ++t) {
+                const std::uint32_t photon =
+                    emitter.firstPhoton + (sweep.cursor + t) % emitter.photonCount;
+                mJobs.push_back({photon, 0, true});
+                setBit(mReshooting, photon, true);
+            }
+            sweep.cursor = (sweep.cursor + take) % emitter.photonCount;
+            sweep.remaining -= take;
+            budget -= take;
+            pending += sweep.remaining > 0 ? 1 : 0;
+        }
+    }
+    mStats.reshotPaths = mJobs.size();
+}
+
+void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonStore& store,
+                                           const PhotonPathGrid& grid) {
+    if (mMoved.empty()) {
+        for (const Job& job : mJobs)
+            setBit(mReshooting, job.path, false);
+        return;
+    }
+    mQueryBoxes.clear();
+    for (const MovedMobile& m : mMoved) {
+        mQueryBoxes.push_back(m.oldBox);
+        mQueryBoxes.push_back(m.newBox);
+    }
+    grid.pathsOverlapping(mQueryBoxes, mCandidates);
+    mFirstAffected.resize(mCandidates.size());
+
+    // The first segment that hit a moved mobile at its old pose (its recorded hit), or that
+    // crosses one at its new pose; -1 when the path is untouched or is being re-shot anyway.
+    const PhotonSegments& segments = store.segments;
+    const auto firstAffected = [&](std::uint32_t p) -> std::int32_t {
+        if (testBit(mReshooting, p)) return -1;
+        const PhotonPath& path = store.paths[p];
+        for (std::uint32_t k = 0; k < path.count; ++k) {
+            const std::size_t s = std::size_t(path.first) + k;
+            for (const MovedMobile& m : mMoved)
+                if (segments.hitEntity[s] == m.entity) return std::int32_t(k);
+            const glm::vec3& o = segments.origin[s];
+            const glm::vec3& d = segments.direction[s];
+            const float length = segments.length[s];
+            // World box, then the tight object-space box (an affine map keeps t), then the
+            // mobile's triangles.
+            for (const MovedMobile& m : mMoved)
+                if (segmentMeetsBox(o, d, length, m.newBox) &&
+                    segmentMeetsBox(glm::vec3(m.toObject * glm::vec4(o, 1.f)),
+                                    glm::mat3(m.toObject) * d, length, m.objectBox) &&
+                    scene.intersectMobile(m.entity, m.pose, Ray{o, 0.f, d, length}))
+                    return std::int32_t(k);
+        }
+        return -1;
+    };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i < range.end(); ++i)
+                              mFirstAffected[i] = firstAffected(mCandidates[i]);
+                      });
+    for (const Job& job : mJobs)
+        setBit(mReshooting, job.path, false);
+    for (std::size_t i = 0; i < mCandidates.size(); ++i)
+        if (mFirstAffected[i] >= 0)
+            mJobs.push_back({mCandidates[i], std::uint32_t(mFirstAffected[i]), false});
+    mStats.candidatePaths = mCandidates.size();
+    mStats.retracedPaths = mJobs.size() - mStats.reshotPaths;
+}
+
+void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta) {
+    const std::size_t n = mJobs.size();
+    delta.paths.resize(n);
+    delta.oldFirst.resize(n + 1);
+    for (std::size_t i = 0; i < n; ++i) {
+        const Job& job = mJobs[i];
+        delta.paths[i] = job.path;
+        delta.oldFirst[i + 1] = delta.oldFirst[i] + store.paths[job.path].count - job.k;
+    }
+    delta.oldSegments.resize(delta.oldFirst[n]);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kCopyGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                              const PhotonPath& path = store.paths[mJobs[i].path];
+                              delta.oldSegments.copyFrom(delta.oldFirst[i], store.segments,
+                                                         path.first + mJobs[i].k,
+                                                         path.count - mJobs[i].k);
+                          }
+                      });
+
+    const PhotonSegments& segments = store.segments;
+    mTracer.trace(
+        scene, surfaces(), n,
+        [&](std::size_t i) {
+            const Job& job = mJobs[i];
+            const PhotonPath& path = store.paths[job.path];
+            if (job.emit) return emitPhoton(mEmitters[path.light], job.path, mSettings.seed);
+            const std::size_t s = std::size_t(path.first) + job.k;
+            return PhotonHead{segments.origin[s], segments.direction[s], segments.power[s],
+                              job.path, segments.bounce[s]};
+        },
+        delta.newSegments, delta.newFirst);
+    mStats.tracedSegments = delta.newSegments.size();
+
+    // A path that still fits its range is rewritten in place (its tail, if shorter, becomes
+    // garbage); a longer one moves to the end of the store.
+    mWrite.resize(n);
+    std::size_t end = store.segments.size();
+    for (std::size_t i = 0; i < n; ++i) {
+        const PhotonPath& path = store.paths[mJobs[i].path];
+        const std::size_t count = mJobs[i].k + delta.newFirst[i + 1] - delta.newFirst[i];
+        if (count <= path.count) {
+            mWrite[i] = path.first;
+            mGarbage += path.count - count;
+        } else {
+            mWrite[i] = end;
+            end += count;
+            mGarbage += path.count;
+        }
+    }
+    store.segments.resize(end);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kCopyGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                              PhotonPath& path = store.paths[mJobs[i].path];
+                              const std::size_t k = mJobs[i].k;
+                              const std::size_t suffix = delta.newFirst[i + 1] - delta.newFirst[i];
+                              if (mWrite[i] != path.first)
+                                  store.segments.copyFrom(mWrite[i], store.segments, path.first, k);
+                              store.segments.copyFrom(mWrite[i] + k, delta.newSegments,
+                                                      delta.newFirst[i], suffix);
+                              path.first = std::uint32_t(mWrite[i]);
+                              path.count = std::uint16_t(k + suffix);
+                          }
+                      });
+}
+
+void PhotonUpdateSystem::compact(PhotonStore& store) {
+    const std::size_t paths = store.paths.size();
+    mEnds.resize(paths + 1);
+    mEnds[0] = 0;
+    for (std::size_t p = 0; p < paths; ++p)
+        mEnds[p + 1] = mEnds[p] + store.paths[p].count;
+    PhotonSegments packed;
+    packed.reserve(capacityFor(mEnds[paths]));
+    packed.resize(mEnds[paths]);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, paths, kCopyGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t p = range.begin(); p < range.end(); ++p) {
+                              PhotonPath& path = store.paths[p];
+                              packed.copyFrom(mEnds[p], store.segments, path.first, path.count);
+                              path.first = mEnds[p];
+                          }
+                      });
+    store.segments = std::move(packed);
+    mGarbage = 0;
+}
+
+} // namespace qgi

@@ -1,0 +1,140 @@
+#pragma once
+
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonEmitter.h"
+#include "systems/photon_update/PhotonSettings.h"
+#include "systems/photon_update/PhotonTracer.h"
+
+#include <glm/mat4x4.hpp>
+
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+namespace qgi {
+
+class RayScene;
+struct PhotonStore;
+struct PhotonDelta;
+class PhotonPathGrid;
+
+/** Keeps the photon ray set in step with the scene every frame (seed 000 sections 2.2-2.3,
+ *  with seed 004's emission, frame-coherent seeding and progressive refinement).
+ *
+ *  Full shot (first frame; a light turned on or off, added or removed; a surface's albedo
+ *  edited; every frame with fullRecompute): photons shared among the lights in proportion to
+ *  power, every path traced, the path grid built; PhotonDelta::full.
+ *
+ *  Otherwise incremental, and the delta lists exactly what changed:
+ *   - Mobiles whose pose changed (the ray scene already holds the new pose): the paths with a
+ *     segment that hit a moved mobile at its old pose (its recorded hit), or that crosses it
+ *     at its new pose, are re-traced from their first such segment; the prefix is untouched.
+ *     Candidates come from the PhotonPathGrid (old and new boxes of every moved mobile), then
+ *     an exact test per segment: cost grows with the paths near the mobiles.
+ *   - Lights that moved or changed: their own photons are re-shot with the same indices,
+ *     reshootBudget photons per frame in all (shared evenly among such lights), oldest first,
+ *     until each has been re-shot once since its last change; the delta reports each one with
+ *     its whole old and new path. Until then the light's photons mix old and new shots.
+ *  A re-traced path is rewritten in place when it fits, else appended; the store is compacted
+ *  when its garbage passes compactionFraction. The grid is told which paths changed and
+ *  re-indexes up to gridRefreshBudget paths a frame.
+ *
+ *  Every random choice comes from PhotonSettings::seed (FrameContext::seed is not read: the
+ *  ray set must not change when only the frame does).
+ *
+ *  Reads:  const WorldTransform (and its change list), const StaticMesh, const MobileMesh,
+ *          const Mesh, const Material (and its change list), const PointLight,
+ *          const SpotLight, const DirectionalLight, ctx<const RayScene> (synced this frame)
+ *  Writes: ctx<PhotonStore>, ctx<PhotonDelta>, ctx<PhotonPathGrid> (created when missing)  */
+class PhotonUpdateSystem {
+public:
+    /// What the last update did.
+    struct FrameStats {
+        bool full = false;
+        std::size_t movedMobiles = 0;
+        std::size_t candidatePaths = 0; ///< from the grid, before the exact test
+        std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
+        std::size_t reshotPaths = 0;    ///< re-shot because their light changed
+        std::size_t tracedSegments = 0;
+        std::size_t reindexedPaths = 0; ///< by the path grid's refresh
+        bool compacted = false;
+    };
+
+    /// Throws qgi::Error on absurd settings (validatePhotonSettings).
+    explicit PhotonUpdateSystem(const PhotonSettings& settings);
+
+    void update(Registry& registry, const FrameContext& frame);
+
+    const PhotonSettings& settings() const { return mSettings; }
+    const FrameStats& lastFrame() const { return mStats; }
+    /// Store segments no path refers to.
+    std::size_t garbageSegments() const { return mGarbage; }
+
+private:
+    struct Mobile {
+        Entity entity;
+        Aabb objectBounds;
+        glm::mat4 pose{1.f}; ///< the pose the stored paths were traced against
+    };
+    struct MovedMobile {
+        Entity entity;
+        glm::mat4 pose{1.f};     ///< new pose
+        glm::mat4 toObject{1.f}; ///< its inverse
+        Aabb objectBox;          ///< object-space bounds, slightly widened
+        Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
+    };
+    struct Sweep {
+        std::uint32_t remaining = 0; ///< photons left to re-shoot since the light last changed
+        std::uint32_t cursor = 0;    ///< next photon, relative to the light's first
+    };
+    /// A path to re-trace from segment k on; k = 0 with `emit` re-shoots it from its light.
+    struct Job {
+        std::uint32_t path = 0;
+        std::uint32_t k = 0;
+        bool emit = false;
+    };
+
+    /// Compares this frame's light sources with those shot; prepares changed lights and starts
+    /// their sweeps. True when the set of shining lights changed (a full shot is due).
+    bool detectLightChanges(const Registry& registry, PhotonStore& store);
+    bool albedoChanged(const Registry& registry) const;
+    void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,
+                  PhotonPathGrid& grid);
+    void captureScene(const Registry& registry, const RayScene& scene);
+    void findMovedMobiles(const Registry& registry, const RayScene& scene, PhotonDelta& delta);
+    void scheduleReshoots();
+    void findAffectedPaths(const RayScene& scene, const PhotonStore& store,
+                           const PhotonPathGrid& grid);
+    void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
+    void compact(PhotonStore& store);
+    /// Store capacity for `live` segments.
+    std::size_t capacityFor(std::size_t live) const;
+    PhotonTracer::Surfaces surfaces() const;
+
+    PhotonSettings mSettings;
+    PhotonTracer mTracer;
+    bool mShot = false;
+    Aabb mSceneBox;
+    std::vector<PhotonEmitter> mEmitters; ///< as shot; index = PhotonPath::light
+    std::vector<Sweep> mSweeps;           ///< per emitter
+    std::vector<glm::vec3> mAlbedo;       ///< by Entity::index, as shot
+    std::vector<Mobile> mMobiles;
+    std::unordered_map<Entity, std::size_t> mMobileIndex;
+    std::size_t mGarbage = 0;
+    FrameStats mStats;
+
+    // Per-frame working memory, kept to reuse its capacity.
+    std::vector<PhotonEmitter> mSources;
+    std::vector<MovedMobile> mMoved;
+    std::vector<Aabb> mQueryBoxes;
+    std::vector<std::uint32_t> mCandidates;
+    std::vector<std::int32_t> mFirstAffected;
+    std::vector<Job> mJobs;
+    std::vector<std::uint32_t> mEnds;
+    std::vector<std::uint64_t> mWrite;      ///< per job: where its path goes in the store
+    std::vector<std::uint64_t> mReshooting; ///< one bit per path: re-shot this frame
+};
+
+} // namespace qgi

@@ -1,0 +1,234 @@
+// Photon update benchmarks, every figure a same-run ratio (docs/BENCHMARKS.md):
+//  - TracePaths/<scene>: PhotonTracer re-traces every path of the first shot from its head
+//    (Russian roulette, reflection, storage), segments per second; against
+//    RawRandomRays/<scene> (bench_raytrace's incoherent-ray ceiling: random origins in the
+//    scene bounds, uniform directions, 8-wide batches) and RawPhotonRays/<scene> (the very
+//    segments the tracer traces, cast without any photon work). Same default thread count.
+//  - MobileUpdate/<scene>: one frame of the quasi-static update while the mobiles move 1 cm
+//    per frame (cornell: its block, 1M photons; atrium: all four mobiles, 4M photons),
+//    against FullReshoot/<scene>: the same frame with fullRecompute.
+#include "components/Material.h"
+#include "components/MobileMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Log.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/BuiltinScenes.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonPathGrid.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "systems/photon_update/PhotonTracer.h"
+#include "systems/photon_update/PhotonUpdateSystem.h"
+
+#include <benchmark/benchmark.h>
+#include <glm/gtc/matrix_transform.hpp>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace qgi {
+namespace {
+
+constexpr std::size_t kGrain = 1024; // rays per task, as in bench_raytrace
+constexpr std::uint32_t kSeed = 1234;
+
+std::uint32_t photonsFor(const std::string& scene) {
+    return scene == "cornell" ? 1'000'000 : 4'000'000;
+}
+
+/// A built-in scene with its ray scene and photon system, shot once per process.
+struct PhotonWorld {
+    Registry registry;
+    std::unique_ptr<PhotonUpdateSystem> system;
+    std::vector<Entity> mobiles;
+    std::vector<glm::mat4> rest;
+    std::uint64_t frame = 0;
+    // The first shot, kept: the tracing benchmarks do not depend on what moved since.
+    std::vector<PhotonHead> heads;
+    std::vector<Ray> segmentRays;
+
+    PhotonWorld(const std::string& name, bool fullRecompute) {
+        buildBuiltinScene(registry, name, SceneOptions{});
+        registry.ctx().emplace<RayScene>().build(registry);
+        PhotonSettings settings;
+        settings.photonCount = photonsFor(name);
+        settings.fullRecompute = fullRecompute;
+        // Photon mode on the cornell box: its luminaire, not the punctual stand-in.
+        settings.punctualLights = name != "cornell";
+        system = std::make_unique<PhotonUpdateSystem>(settings);
+        system->update(registry, FrameContext{});
+        registry.clearChanges();
+        mobiles = registry.view<const MobileMesh>().entities();
+        for (const Entity e : mobiles)
+            rest.push_back(registry.get<WorldTransform>(e).matrix);
+        const PhotonStore& shot = store();
+        for (std::uint32_t p = 0; p < shot.pathCount(); ++p) {
+            const PhotonPath& path = shot.paths[p];
+            const PhotonSegments& s = shot.segments;
+            heads.push_back(
+                {s.origin[path.first], s.direction[path.first], s.power[path.first], p, 0});
+            for (std::size_t k = path.first; k < path.first + path.count; ++k)
+                segmentRays.push_back(
+                    Ray{s.origin[k], 0.f, s.direction[k], std::numeric_limits<float>::infinity()});
+        }
+    }
+
+    const PhotonStore& store() const { return registry.ctx().get<PhotonStore>(); }
+
+    /// Every mobile 1 cm further along x, turning back after 5 cm; then the frame's update.
+    void step() {
+        ++frame;
+        const int phase = int(frame % 10);
+        const float offset = 0.01f * float(phase <= 5 ? phase : 10 - phase);
+        for (std::size_t i = 0; i < mobiles.size(); ++i)
+            registry.patch<WorldTransform>(mobiles[i]).matrix =
+                glm::translate(rest[i], glm::vec3(offset, 0.f, 0.f));
+        registry.ctx().get<RayScene>().syncMoved(registry);
+        system->update(registry, FrameContext{frame, 0.0, 0.f, 0});
+        registry.clearChanges();
+    }
+};
+
+PhotonWorld& world(const std::string& name, bool fullRecompute = false) {
+    static std::map<std::pair<std::string, bool>, std::unique_ptr<PhotonWorld>> worlds;
+    const std::pair key(name, fullRecompute);
+    auto it = worlds.find(key);
+    if (it == worlds.end()) {
+        worlds.clear(); // one world at a time: 4M photons take a few GiB
+        it = worlds.emplace(key, std::make_unique<PhotonWorld>(name, fullRecompute)).first;
+    }
+    return *it->second;
+}
+
+/// Albedo by entity index, as the system builds it.
+std::vector<glm::vec3> albedoTable(const Registry& registry) {
+    std::vector<glm::vec3> albedo;
+    registry.view<const Material>().each([&](Entity e, const Material& m) {
+        if (e.index >= albedo.size()) albedo.resize(e.index + 1, glm::vec3(0.f));
+        albedo[e.index] = glm::clamp(m.baseColor, 0.f, 1.f);
+    });
+    return albedo;
+}
+
+void BM_TracePaths(benchmark::State& state, const std::string& name) {
+    const PhotonWorld& w = world(name);
+    const std::vector<glm::vec3> albedo = albedoTable(w.registry);
+    const PhotonTracer::Surfaces surfaces{w.system->settings().seed,
+                                          w.system->settings().maxBounces, albedo};
+    const RayScene& scene = w.registry.ctx().get<RayScene>();
+    PhotonTracer tracer;
+    PhotonSegments out;
+    std::vector<std::uint32_t> ends;
+    for (auto _ : state) {
+        out.clear();
+        ends.assign(1, 0);
+        tracer.trace(
+            scene, surfaces, w.heads.size(), [&](std::size_t p) { return w.heads[p]; }, out, ends);
+        benchmark::DoNotOptimize(out.origin.data());
+    }
+    state.counters["segments/s"] =
+        benchmark::Counter(double(state.iterations() * out.size()), benchmark::Counter::kIsRate);
+    state.counters["segments/path"] = double(out.size()) / double(w.heads.size());
+}
+
+/// Casts `rays` in parallel 8-wide batches; reports rays/s.
+void castRays(benchmark::State& state, const RayScene& scene, const std::vector<Ray>& rays) {
+    std::vector<std::optional<Hit>> hits(rays.size());
+    for (auto _ : state) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, rays.size(), kGrain),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+                              scene.intersect(std::span(rays).subspan(r.begin(), r.size()),
+                                              std::span(hits).subspan(r.begin(), r.size()));
+                          });
+        benchmark::ClobberMemory();
+    }
+    state.counters["rays/s"] =
+        benchmark::Counter(double(state.iterations() * rays.size()), benchmark::Counter::kIsRate);
+}
+
+void BM_RawRandomRays(benchmark::State& state, const std::string& name) {
+    const PhotonWorld& w = world(name);
+    const Aabb bounds = w.registry.ctx().get<SceneInfo>().bounds;
+    std::mt19937 rng(kSeed);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::normal_distribution<float> gauss;
+    std::vector<Ray> rays(std::size_t(1) << 20);
+    for (Ray& ray : rays) {
+        ray.origin = bounds.min + glm::vec3(unit(rng), unit(rng), unit(rng)) * bounds.extent();
+        do
+            ray.direction = {gauss(rng), gauss(rng), gauss(rng)};
+        while (glm::length(ray.direction) < 1e-6f);
+        ray.direction = glm::normalize(ray.direction);
+    }
+    castRays(state, w.registry.ctx().get<RayScene>(), rays);
+}
+
+void BM_RawPhotonRays(benchmark::State& state, const std::string& name) {
+    const PhotonWorld& w = world(name);
+    castRays(state, w.registry.ctx().get<RayScene>(), w.segmentRays);
+}
+
+void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced, double candidates,
+                  double segments) {
+    const double frames = double(state.iterations());
+    state.counters["retraced/frame"] = retraced / frames;
+    state.counters["candidates/frame"] = candidates / frames;
+    state.counters["segments/frame"] = segments / frames;
+    state.counters["paths"] = double(w.store().pathCount());
+    state.counters["store MiB"] =
+        double(w.store().segments.size() * PhotonSegments::kBytesPerSegment) / (1 << 20);
+    state.counters["grid MiB"] =
+        double(w.registry.ctx().get<PhotonPathGrid>().memoryBytes()) / (1 << 20);
+}
+
+void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
+    PhotonWorld& w = world(name, fullRecompute);
+    double retraced = 0, candidates = 0, segments = 0;
+    for (auto _ : state) {
+        w.step();
+        const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
+        retraced += double(stats.retracedPaths);
+        candidates += double(stats.candidatePaths);
+        segments += double(stats.tracedSegments);
+    }
+    reportFrames(state, w, retraced, candidates, segments);
+}
+
+} // namespace
+} // namespace qgi
+
+int main(int argc, char** argv) {
+    using namespace qgi;
+    using benchmark::RegisterBenchmark;
+    setLogLevel(LogLevel::Warning);
+    for (const std::string& scene : builtinSceneNames()) {
+        const auto id = [&](const char* what) { return std::string(what) + "/" + scene; };
+        RegisterBenchmark(id("TracePaths").c_str(), BM_TracePaths, scene)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("RawPhotonRays").c_str(), BM_RawPhotonRays, scene)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("RawRandomRays").c_str(), BM_RawRandomRays, scene)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("MobileUpdate").c_str(), BM_MobileUpdate, scene, false)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("FullReshoot").c_str(), BM_MobileUpdate, scene, true)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+    }
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    benchmark::RunSpecifiedBenchmarks();
+    benchmark::Shutdown();
+    return 0;
+}

@@ -1,0 +1,172 @@
+// Photon-mode DETP irradiance on the built-in cornell scene against the independent Monte
+// Carlo reference (tests/reference: path tracing with next-event estimation, its own code).
+//
+// Statistics behind the bounds. At vertex v the DETP estimate is a sum of the powers p_j of
+// the segments crossing its disc, divided by pi r^2. Treating the crossings as a Poisson
+// process, its standard error is sqrt(sum p_j^2) / (pi r^2), computed here from the segments
+// themselves. The reference reports its own standard error. If DETP were unbiased, the
+// normalised errors z = (E_detp - E_ref) / sqrt(se_detp^2 + se_ref^2) would be standard
+// normal: median |z| = 0.674, 90th percentile 1.645. DETP is biased by the disc's smoothing
+// (the mean irradiance over a disc of radius r, not the value at its centre), which matters
+// only where irradiance curves within a centimetre (shadow edges). We allow for it with
+// bounds of 1.0 and 2.5 on the spread. A systematic error hides in per-vertex noise, so the
+// test also checks the mean of the signed z (standard error 1/sqrt(n)) to 4 sigma: scaling the
+// estimate by 0.95 fails it.
+#include "components/Mesh.h"
+#include "components/StaticMesh.h"
+#include "components/VertexIrradiance.h"
+#include "components/WorldTransform.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/BuiltinScenes.h"
+#include "systems/detp/DetpIrradianceSystem.h"
+#include "systems/detp/DiscCrossing.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "systems/photon_update/PhotonUpdateSystem.h"
+#include "tests/reference/IrradianceReference.h"
+
+#include <glm/gtc/constants.hpp>
+#include <glm/mat3x3.hpp>
+#include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace qgi {
+namespace {
+
+struct Sample {
+    glm::vec3 position, normal;
+    glm::vec3 irradiance; ///< from the system, W/m^2
+};
+
+// A vertex whose disc neighbourhood is an open plane: no other surface within 2r along its
+// tangent plane or above it. Vertices in corners, under blocks or behind the luminaire see
+// geometry DETP's plain disc does not account for (the seed's "reachable area" problem).
+bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec3& n, float r) {
+    const glm::vec3 t = glm::normalize(std::abs(n.x) < 0.9f ? glm::cross(n, glm::vec3(1, 0, 0))
+                                                            : glm::cross(n, glm::vec3(0, 1, 0)));
+    const glm::vec3 b = glm::cross(n, t);
+    const glm::vec3 start = x + n * 1e-4f;
+    if (scene.occluded(Ray{start, 0.f, n, 2.f * r})) return false;
+    for (int k = 0; k < 8; ++k) {
+        const float a = glm::two_pi<float>() * float(k) / 8.f;
+        const glm::vec3 d = std::cos(a) * t + std::sin(a) * b;
+        if (scene.occluded(Ray{start, 0.f, d, 2.f * r})) return false;
+    }
+    return true;
+}
+
+double percentile(std::vector<double> v, double p) {
+    std::sort(v.begin(), v.end());
+    return v[std::min(v.size() - 1, std::size_t(p * double(v.size())))];
+}
+
+TEST(DetpAccuracy, CornellPhotonModeAgreesWithMonteCarloReference) {
+    Registry world;
+    buildBuiltinScene(world, "cornell", SceneOptions{});
+    RayScene& scene = world.ctx().emplace<RayScene>();
+    scene.build(world);
+
+    PhotonSettings photonSettings;
+    photonSettings.photonCount = 500'000;
+    photonSettings.seed = 3;
+    PhotonUpdateSystem photons(photonSettings);
+    DetpIrradianceSystem detp(DetpSettings{});
+    detp.build(world);
+    photons.update(world, FrameContext{});
+    detp.update(world, FrameContext{});
+    const float r = detp.discRadius();
+
+    // 240 static vertices with open neighbourhoods, spread evenly over the list.
+    std::vector<Sample> all;
+    world.view<const StaticMesh, const Mesh, const WorldTransform, const VertexIrradiance>().each(
+        [&](const StaticMesh&, const Mesh& mesh, const WorldTransform& world_,
+            const VertexIrradiance& e) {
+            const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world_.matrix)));
+            for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
+                const glm::vec3 x = glm::vec3(world_.matrix * glm::vec4(mesh.positions[v], 1.f));
+                const glm::vec3 n = glm::normalize(normalMatrix * mesh.normals[v]);
+                if (openNeighbourhood(scene, x, n, r)) all.push_back({x, n, e.irradiance[v]});
+            }
+        });
+    ASSERT_GE(all.size(), 240u);
+    std::vector<Sample> samples;
+    for (std::size_t i = 0; i < 240; ++i) samples.push_back(all[i * all.size() / 240]);
+
+    // DETP's own statistics from the stored segments, by brute force (which also checks the
+    // system's disc index on a real scene).
+    const PhotonStore& store = world.ctx().get<PhotonStore>();
+    const PhotonSegments& s = store.segments;
+    std::vector<double> sum(samples.size()), sumSquares(samples.size());
+    tbb::parallel_for(std::size_t(0), samples.size(), [&](std::size_t i) {
+        double total = 0, squares = 0;
+        for (const PhotonPath& path : store.paths)
+            for (std::uint32_t k = path.first; k < path.first + path.count; ++k)
+                if (crossesDisc(s.origin[k], s.direction[k], s.length[k], samples[i].position,
+                                samples[i].normal, r)) {
+                    const double p = double(s.power[k].r) + s.power[k].g + s.power[k].b;
+                    total += p;
+                    squares += p * p;
+                }
+        sum[i] = total;
+        sumSquares[i] = squares;
+    });
+
+    reference::ReferenceSettings referenceSettings;
+    referenceSettings.samplesPerPoint = 16384;
+    referenceSettings.includeEnvironment = false; // photons are not emitted by the sky
+    std::vector<glm::vec3> xs, ns;
+    for (const Sample& sample : samples) {
+        xs.push_back(sample.position);
+        ns.push_back(sample.normal);
+    }
+    const auto expected = reference::IrradianceReference(world, scene, referenceSettings).estimate(xs, ns);
+
+    const double discArea = glm::pi<double>() * double(r) * double(r);
+    std::vector<double> relative, normalised;
+    double signedZ = 0, totalEstimate = 0, totalReference = 0, totalVariance = 0;
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        const glm::vec3& e = samples[i].irradiance;
+        const double estimate = double(e.r) + e.g + e.b;
+        EXPECT_NEAR(estimate, sum[i] / discArea, 1e-4 * estimate + 1e-6) << "disc index != brute force at " << i;
+        const double ref = expected[i].mean.r + expected[i].mean.g + expected[i].mean.b;
+        const double refError = expected[i].standardError.r + expected[i].standardError.g +
+                                expected[i].standardError.b; // channels are correlated: add
+        const double detpError = std::sqrt(sumSquares[i]) / discArea;
+        if (ref <= 0.0) { // no light reaches it at all (the face of a block resting on the floor)
+            EXPECT_LT(estimate, 1e-6);
+            continue;
+        }
+        const double sigma = std::sqrt(detpError * detpError + refError * refError);
+        relative.push_back(std::abs(estimate - ref) / ref);
+        normalised.push_back(std::abs(estimate - ref) / sigma);
+        signedZ += (estimate - ref) / sigma;
+        totalEstimate += estimate;
+        totalReference += ref;
+        totalVariance += sigma * sigma;
+    }
+    const double medianRelative = percentile(relative, 0.5), p90Relative = percentile(relative, 0.9);
+    const double medianZ = percentile(normalised, 0.5), p90Z = percentile(normalised, 0.9);
+    std::printf("cornell photon mode, %u photons, r = %.4f m, %zu vertices: relative error median "
+                "%.1f%%, 90th percentile %.1f%%; |z| median %.2f, 90th percentile %.2f\n",
+                photonSettings.photonCount, double(r), relative.size(), 100 * medianRelative,
+                100 * p90Relative, medianZ, p90Z);
+    const double n = double(relative.size());
+    const double meanZ = signedZ / n;
+    const double totalZ = (totalEstimate - totalReference) / std::sqrt(totalVariance);
+    std::printf("mean signed z %.3f (bound %.3f), summed irradiance ratio %.4f (z = %.2f)\n", meanZ,
+                4.0 / std::sqrt(n), totalEstimate / totalReference, totalZ);
+    ASSERT_GE(relative.size(), 200u);
+    EXPECT_LE(medianZ, 1.0);
+    EXPECT_LE(p90Z, 2.5);
+    // No systematic error: unbiased errors average out, and z's mean has standard error
+    // 1/sqrt(n). (The summed irradiance is no such test: it is dominated by the ceiling next to
+    // the point light hung 2 cm below it, where the disc average is legitimately below the
+    // centre value: by the point-light closed form, 15 % at the foot for h = 2r.)
+    EXPECT_LE(std::abs(meanZ), 4.0 / std::sqrt(n));
+}
+
+} // namespace
+} // namespace qgi

@@ -1,0 +1,725 @@
+#include "systems/detp/DetpIrradianceSystem.h"
+
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/Name.h"
+#include "components/StaticMesh.h"
+#include "components/VertexIrradiance.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/detp/DiscCrossing.h"
+#include "systems/photon_update/PhotonPathGrid.h"
+#include "systems/photon_update/PhotonStore.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <glm/gtc/constants.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+
+#include <oneapi/tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <span>
+#include <vector>
+
+namespace qgi {
+namespace {
+
+using ::testing::HasSubstr;
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr double kPi = glm::pi<double>();
+const glm::mat4 kIdentity{1.f};
+
+/// n x n quads spanning origin + [0, 1] u + [0, 1] v, facing cross(u, v). Vertex (i, j) is
+/// origin + i/n u + j/n v, at index i * (n + 1) + j.
+Mesh gridMesh(glm::vec3 origin, glm::vec3 u, glm::vec3 v, int n) {
+    Mesh mesh;
+    const glm::vec3 normal = glm::normalize(glm::cross(u, v));
+    for (int i = 0; i <= n; ++i)
+        for (int j = 0; j <= n; ++j) {
+            mesh.positions.push_back(origin + (float(i) / float(n)) * u +
+                                     (float(j) / float(n)) * v);
+            mesh.normals.push_back(normal);
+        }
+    const auto at = [n](int i, int j) { return std::uint32_t(i * (n + 1) + j); };
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j)
+            mesh.indices.insert(mesh.indices.end(), {at(i, j), at(i + 1, j), at(i + 1, j + 1),
+                                                     at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    return mesh;
+}
+
+Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world, bool mobile,
+               const char* name) {
+    const Entity e = registry.create();
+    registry.emplace<Name>(e, name);
+    registry.emplace<Mesh>(e, std::move(mesh));
+    registry.emplace<WorldTransform>(e, world);
+    if (mobile)
+        registry.emplace<MobileMesh>(e);
+    else
+        registry.emplace<StaticMesh>(e);
+    return e;
+}
+
+/// The world resources the system reads: the RayScene (its Embree device hosts the discs),
+/// an empty ray set and a delta that asks for a full estimate.
+void addResources(Registry& registry) {
+    registry.ctx().emplace<RayScene>();
+    registry.ctx().emplace<PhotonStore>();
+    registry.ctx().emplace<PhotonDelta>().full = true;
+}
+
+struct Segment {
+    glm::vec3 origin{0.f};
+    glm::vec3 direction{0.f, -1.f, 0.f};
+    float length = kInf;
+    glm::vec3 power{1.f};
+    Entity hit;
+    std::uint32_t primitive = 0;
+    std::uint8_t bounce = 0;
+};
+
+void push(PhotonSegments& s, const Segment& seg) {
+    s.origin.push_back(seg.origin);
+    s.direction.push_back(seg.direction);
+    s.length.push_back(seg.length);
+    s.power.push_back(seg.power);
+    s.hitEntity.push_back(seg.hit);
+    s.hitPrimitive.push_back(seg.primitive);
+    s.bounce.push_back(seg.bounce);
+}
+
+void appendPath(PhotonStore& store, std::span<const Segment> path) {
+    store.paths.push_back({std::uint32_t(store.segments.size()), std::uint16_t(path.size()), 0});
+    for (const Segment& seg : path)
+        push(store.segments, seg);
+}
+
+const VertexIrradiance& irradiance(const Registry& registry, Entity e) {
+    return registry.get<VertexIrradiance>(e);
+}
+
+/// Expected DETP value at the foot of an isotropic point light of power P at height h over a
+/// plane: the fraction of photons that cross the disc (its solid angle over 4 pi) times P,
+/// over the disc's area. 1 - h / sqrt(h^2 + r^2) is computed without cancellation.
+double footExpectation(double power, double h, double r) {
+    const double x = (r * r) / (h * h);
+    const double oneMinusCos = -std::expm1(-0.5 * std::log1p(x));
+    return power * oneMinusCos / (2.0 * kPi * r * r);
+}
+
+// ---- analytic cases -----------------------------------------------------------------------
+
+TEST(Detp, PointLightClosedFormTendsToTheInverseSquareLaw) {
+    // E(r) / E0 = (2 / x) (1 - (1 + x)^-1/2) = 1 - 3x/4 + 5x^2/8 - ..., x = r^2 / h^2: an
+    // alternating series, so the relative bias is -3x/4 within 5x^2/8 (plus a few ulps of the
+    // ratio's rounding in double, 4 x 2^-52).
+    const double power = 100.0, h = 2.0;
+    const double e0 = power / (4.0 * kPi * h * h);
+    for (const double r : {0.2, 0.02, 0.002}) {
+        const double x = r * r / (h * h);
+        const double relative = footExpectation(power, h, r) / e0 - 1.0;
+        EXPECT_NEAR(relative, -0.75 * x, 0.625 * x * x + std::ldexp(4.0, -52)) << "r = " << r;
+    }
+}
+
+TEST(Detp, PointLightOverABlackPlane) {
+    constexpr double kPower = 100.0, kHeight = 1.0;
+    constexpr std::size_t kPhotons = 2'000'000;
+    Registry registry;
+    addResources(registry);
+    // A 2 x 2 quad floor over [-1, 1]^2 at y = 0: vertex 4 is the foot of the light.
+    const Entity floor =
+        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+                kIdentity, false, "floor");
+    ASSERT_EQ(registry.get<Mesh>(floor).positions[4], glm::vec3(0.f));
+
+    // Isotropic photons; those heading down end on the plane, the rest leave the scene.
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    std::mt19937_64 rng(2024);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const glm::vec3 light(0.f, float(kHeight), 0.f);
+    const glm::vec3 photonPower(float(kPower / double(kPhotons)));
+    for (std::size_t i = 0; i < kPhotons; ++i) {
+        const double cosTheta = 1.0 - 2.0 * unit(rng), phi = 2.0 * kPi * unit(rng);
+        const double sinTheta = std::sqrt(std::max(0.0, 1.0 - cosTheta * cosTheta));
+        const glm::vec3 d(float(sinTheta * std::cos(phi)), float(cosTheta),
+                          float(sinTheta * std::sin(phi)));
+        const bool down = d.y < 0.f;
+        const Segment seg{
+            light, d, down ? float(kHeight) / -d.y : kInf, photonPower, down ? floor : Entity{},
+            0,     0};
+        appendPath(store, std::span(&seg, 1));
+    }
+
+    const double e0 = kPower / (4.0 * kPi * kHeight * kHeight);
+    for (const double r : {0.1, 0.03}) {
+        DetpSettings settings;
+        settings.discRadius = float(r);
+        DetpIrradianceSystem system(settings);
+        system.build(registry);
+        system.update(registry, {});
+        const double estimate = irradiance(registry, floor).irradiance[4].x;
+
+        // The count of crossing photons is binomial(N, p), p = the disc's solid angle / 4 pi.
+        const double expected = footExpectation(kPower, kHeight, r);
+        const double p = expected * kPi * r * r / kPower;
+        const double sigma =
+            kPower / double(kPhotons) / (kPi * r * r) * std::sqrt(double(kPhotons) * p * (1.0 - p));
+        EXPECT_NEAR(estimate, expected, 4.0 * sigma) << "r = " << r;
+        // Small r: the inverse-square value within the estimate's own error plus the known bias.
+        if (r < 0.05) {
+            EXPECT_NEAR(estimate, e0, 4.0 * sigma + std::abs(expected - e0)) << "r = " << r;
+        }
+    }
+}
+
+/// Parallel rays of total power 1 W over the unit square at y = 0, in a 10 x 10 quad floor; the
+/// true irradiance is 1 W/m^2. Returns the relative errors at the 81 interior vertices, whose
+/// discs (r = 0.04, spacing 0.1) are disjoint and inside the square.
+std::vector<double> beamErrors(Registry& registry, DetpIrradianceSystem& system, Entity floor,
+                               std::size_t photons, std::uint64_t seed) {
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    store = PhotonStore{};
+    registry.ctx().get<PhotonDelta>().full = true;
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    const glm::vec3 power(1.f / float(photons));
+    for (std::size_t i = 0; i < photons; ++i) {
+        const Segment seg{{unit(rng), 1.f, unit(rng)}, {0.f, -1.f, 0.f}, 1.f, power, floor, 0, 0};
+        appendPath(store, std::span(&seg, 1));
+    }
+    system.update(registry, {});
+    std::vector<double> errors;
+    const auto& values = irradiance(registry, floor).irradiance;
+    for (int i = 1; i < 10; ++i)
+        for (int j = 1; j < 10; ++j)
+            errors.push_back(double(values[i * 11 + j].x) - 1.0);
+    return errors;
+}
+
+TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
+    constexpr double kRadius = 0.04;
+    Registry registry;
+    addResources(registry);
+    const Entity floor =
+        addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+                kIdentity, false, "floor");
+    DetpSettings settings;
+    settings.discRadius = float(kRadius);
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+
+    // Each disc's count is binomial(N, p), p = pi r^2 / A: relative error sqrt((1 - p) / (N p)).
+    // The RMS of M such errors has a relative standard deviation of about 1 / sqrt(2M); the
+    // ratio of two independent RMS values about 1 / sqrt(M). Both are checked at 4 sigma.
+    constexpr int kSeeds = 4;
+    const double p = kPi * kRadius * kRadius;
+    std::vector<double> rms;
+    for (const std::size_t photons : {20'000u, 80'000u, 320'000u}) {
+        double sum2 = 0.0;
+        std::size_t m = 0;
+        for (int seed = 0; seed < kSeeds; ++seed)
+            for (const double e : beamErrors(registry, system, floor, photons, 100 + seed)) {
+                sum2 += e * e;
+                ++m;
+            }
+        rms.push_back(std::sqrt(sum2 / double(m)));
+        const double theory = std::sqrt((1.0 - p) / (double(photons) * p));
+        EXPECT_NEAR(rms.back(), theory, 4.0 * theory / std::sqrt(2.0 * double(m)))
+            << photons << " photons";
+    }
+    const double samples = 81.0 * kSeeds;
+    for (std::size_t i = 0; i + 1 < rms.size(); ++i)
+        EXPECT_NEAR(rms[i] / rms[i + 1], 2.0, 2.0 * 4.0 / std::sqrt(samples)) << "step " << i;
+}
+
+// ---- counting rules -----------------------------------------------------------------------
+
+TEST(Detp, SegmentsFromBehindDoNotCount) {
+    Registry registry;
+    addResources(registry);
+    const Entity floor =
+        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+                kIdentity, false, "floor");
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    const Segment fromBelow{{0.f, -1.f, 0.f}, {0.f, 1.f, 0.f}, kInf, glm::vec3(3.f), {}, 0, 1};
+    appendPath(store, std::span(&fromBelow, 1));
+    DetpSettings settings;
+    settings.discRadius = 0.1f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    EXPECT_EQ(irradiance(registry, floor).irradiance[4], glm::vec3(0.f));
+
+    const Segment fromAbove{{0.f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, glm::vec3(3.f), floor, 0, 1};
+    appendPath(store, std::span(&fromAbove, 1));
+    registry.ctx().get<PhotonDelta>().full = true;
+    system.update(registry, {});
+    EXPECT_FLOAT_EQ(irradiance(registry, floor).irradiance[4].x, float(3.0 / (kPi * 0.01)));
+}
+
+TEST(Detp, HybridModeSkipsSegmentsThatLeaveALight) {
+    Registry registry;
+    addResources(registry);
+    const Entity floor =
+        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+                kIdentity, false, "floor");
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    const Segment direct{{0.f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, {2.f, 0.f, 0.f}, floor, 0, 0};
+    const Segment bounced{{0.05f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, {0.f, 5.f, 0.f}, floor, 0, 1};
+    appendPath(store, std::span(&direct, 1));
+    appendPath(store, std::span(&bounced, 1));
+    const float area = float(kPi * 0.01);
+    for (const bool hybrid : {false, true}) {
+        DetpSettings settings;
+        settings.discRadius = 0.1f;
+        settings.hybrid = hybrid;
+        DetpIrradianceSystem system(settings);
+        system.build(registry);
+        system.update(registry, {});
+        const glm::vec3 e = irradiance(registry, floor).irradiance[4];
+        EXPECT_FLOAT_EQ(e.x, hybrid ? 0.f : 2.f / area);
+        EXPECT_FLOAT_EQ(e.y, 5.f / area);
+    }
+}
+
+// ---- incremental update -------------------------------------------------------------------
+
+/// The test world of the incremental tests: a floor (y = 0, facing up) and a wall (x = 0,
+/// facing +x), both static and 20 x 20 quads over the unit square, and a small mobile plate
+/// facing up that moves.
+struct IncrementalWorld {
+    Registry registry;
+    Entity floor, wall, plate;
+    static constexpr float kRadius = 0.06f; // discs overlap: spacing 0.05
+
+    IncrementalWorld() {
+        addResources(registry);
+        floor = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
+                        kIdentity, false, "floor");
+        wall = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
+                       kIdentity, false, "wall");
+        plate = addMesh(registry,
+                        gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
+                        glm::translate(kIdentity, {0.5f, 0.3f, 0.5f}), true, "plate");
+    }
+};
+
+glm::vec3 randomUnit(std::mt19937& rng) {
+    std::normal_distribution<float> normal;
+    glm::vec3 v;
+    do {
+        v = {normal(rng), normal(rng), normal(rng)};
+    } while (glm::dot(v, v) < 1e-6f);
+    return glm::normalize(v);
+}
+
+/// A random path in the unit box: segments heading down end on the floor plane (where the
+/// next one starts, heading up), segments heading up leave the scene. Powers in [0.5, 1.5] W.
+std::vector<Segment> randomPath(std::mt19937& rng, const IncrementalWorld& world, glm::vec3 origin,
+                                std::uint8_t bounce) {
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::uniform_int_distribution<std::uint32_t> triangle(0, 799);
+    std::vector<Segment> path;
+    for (;;) {
+        Segment seg;
+        seg.origin = origin;
+        seg.direction = randomUnit(rng);
+        if (bounce > 0 && origin.y == 0.f) seg.direction.y = std::abs(seg.direction.y);
+        seg.power = glm::vec3(0.5f + unit(rng), 0.5f + unit(rng), 0.5f + unit(rng));
+        seg.bounce = bounce++;
+        if (seg.direction.y < 0.f) {
+            seg.length = origin.y / -seg.direction.y;
+            seg.hit = world.floor;
+            seg.primitive = triangle(rng);
+            path.push_back(seg);
+            origin = seg.origin + seg.length * seg.direction;
+            origin.y = 0.f;
+            if (path.size() < 4) continue;
+        } else {
+            path.push_back(seg);
+        }
+        return path;
+    }
+}
+
+/// A frame of the quasi-static update done by hand: some paths get a new suffix from a random
+/// segment on; the delta holds the old and new suffixes; the store gets the re-traced paths at
+/// its end (their old ranges become garbage, as in the photon store).
+void randomDelta(std::mt19937& rng, IncrementalWorld& world, std::size_t paths) {
+    PhotonStore& store = world.registry.ctx().get<PhotonStore>();
+    PhotonDelta& delta = world.registry.ctx().get<PhotonDelta>();
+    delta = PhotonDelta{};
+    delta.oldFirst = {0};
+    delta.newFirst = {0};
+    std::uniform_int_distribution<std::uint32_t> pickPath(0, std::uint32_t(store.paths.size() - 1));
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    for (std::size_t i = 0; i < paths; ++i) {
+        const std::uint32_t p = pickPath(rng);
+        if (std::find(delta.paths.begin(), delta.paths.end(), p) != delta.paths.end()) continue;
+        const PhotonPath path = store.paths[p];
+        const std::uint32_t from =
+            std::uniform_int_distribution<std::uint32_t>(0, path.count - 1u)(rng);
+        std::vector<Segment> segments;
+        for (std::uint32_t k = 0; k < path.count; ++k) {
+            const std::size_t s = path.first + k;
+            const Segment seg{store.segments.origin[s],    store.segments.direction[s],
+                              store.segments.length[s],    store.segments.power[s],
+                              store.segments.hitEntity[s], store.segments.hitPrimitive[s],
+                              store.segments.bounce[s]};
+            if (k >= from) push(delta.oldSegments, seg);
+            if (k < from) segments.push_back(seg);
+        }
+        // The new suffix: the same head ray, now stopped early (by the mobile), then a new
+        // random continuation from there.
+        Segment head{store.segments.origin[path.first + from],
+                     store.segments.direction[path.first + from],
+                     0.f,
+                     store.segments.power[path.first + from],
+                     world.plate,
+                     0,
+                     store.segments.bounce[path.first + from]};
+        const float oldLength = store.segments.length[path.first + from];
+        head.length = (std::isinf(oldLength) ? 2.f : oldLength) * (0.2f + 0.7f * unit(rng));
+        segments.push_back(head);
+        for (const Segment& seg : randomPath(rng, world, head.origin + head.length * head.direction,
+                                             std::uint8_t(head.bounce + 1)))
+            segments.push_back(seg);
+        if (segments.size() > 6) segments.resize(6);
+        for (std::size_t k = from; k < segments.size(); ++k)
+            push(delta.newSegments, segments[k]);
+        delta.paths.push_back(p);
+        delta.oldFirst.push_back(std::uint32_t(delta.oldSegments.size()));
+        delta.newFirst.push_back(std::uint32_t(delta.newSegments.size()));
+        store.paths[p] = {std::uint32_t(store.segments.size()), std::uint16_t(segments.size()), 0};
+        for (const Segment& seg : segments)
+            push(store.segments, seg);
+    }
+}
+
+/// The static vertices whose disc some delta segment crosses (brute force).
+std::vector<bool> crossedByDelta(const IncrementalWorld& world, Entity e, float radius) {
+    const Mesh& mesh = world.registry.get<Mesh>(e);
+    const PhotonDelta& delta = world.registry.ctx().get<PhotonDelta>();
+    std::vector<bool> crossed(mesh.positions.size(), false);
+    for (const PhotonSegments* s : {&delta.oldSegments, &delta.newSegments})
+        for (std::size_t i = 0; i < s->size(); ++i)
+            for (std::size_t v = 0; v < crossed.size(); ++v)
+                if (crossesDisc(s->origin[i], s->direction[i], s->length[i], mesh.positions[v],
+                                mesh.normals[v], radius))
+                    crossed[v] = true;
+    return crossed;
+}
+
+bool bitEqual(const glm::vec3& a, const glm::vec3& b) {
+    return std::memcmp(&a, &b, sizeof(glm::vec3)) == 0;
+}
+
+bool inDirtyRange(const VertexIrradiance& vi, std::uint32_t v) {
+    return std::any_of(vi.dirty.begin(), vi.dirty.end(),
+                       [v](const DirtyRange& r) { return r.begin <= v && v < r.end; });
+}
+
+TEST(Detp, IncrementalEqualsFullAfter100RandomUpdates) {
+    IncrementalWorld world;
+    Registry& registry = world.registry;
+    std::mt19937 rng(99);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    for (int i = 0; i < 3000; ++i) {
+        const auto path =
+            randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0);
+        appendPath(store, path);
+    }
+    DetpSettings settings;
+    settings.discRadius = IncrementalWorld::kRadius;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    registry.clearChanges();
+    ASSERT_TRUE(system.lastFrame().full);
+
+    std::size_t segmentsSeen = store.segments.size();
+    std::size_t untouchedChecked = 0, touchedChanged = 0, plateIncremental = 0;
+    for (int frame = 1; frame <= 100; ++frame) {
+        randomDelta(rng, world, 1 + std::size_t(unit(rng) * 40.f));
+        segmentsSeen += registry.ctx().get<PhotonDelta>().oldSegments.size() +
+                        registry.ctx().get<PhotonDelta>().newSegments.size();
+        // The plate moves now and then, as the transform system would report it; it stays
+        // put over the last frames, where its vertices are updated incrementally.
+        const bool moves = frame % 10 == 5;
+        if (moves) {
+            registry.patch<WorldTransform>(world.plate).matrix =
+                glm::translate(kIdentity, {0.25f + 0.5f * unit(rng), 0.1f + 0.4f * unit(rng),
+                                           0.25f + 0.5f * unit(rng)});
+            registry.ctx().get<PhotonDelta>().movedMobiles = {world.plate};
+        }
+        const std::vector<glm::vec3> plateBefore =
+            registry.get<VertexIrradiance>(world.plate).irradiance;
+        std::vector<std::vector<glm::vec3>> before;
+        std::vector<std::vector<bool>> crossed;
+        for (const Entity e : {world.floor, world.wall}) {
+            auto& vi = registry.get<VertexIrradiance>(e);
+            vi.dirty.clear(); // as the renderer does after uploading
+            before.push_back(vi.irradiance);
+            crossed.push_back(crossedByDelta(world, e, IncrementalWorld::kRadius));
+        }
+        system.update(registry, {});
+        registry.clearChanges();
+        ASSERT_FALSE(system.lastFrame().full) << "frame " << frame;
+        EXPECT_EQ(system.lastFrame().movedMobiles, moves ? 1u : 0u);
+        if (!moves) {
+            const auto& plate = registry.get<VertexIrradiance>(world.plate).irradiance;
+            for (std::size_t v = 0; v < plate.size(); ++v)
+                plateIncremental += bitEqual(plate[v], plateBefore[v]) ? 0 : 1;
+        }
+
+        for (std::size_t m = 0; m < 2; ++m) {
+            const auto& vi = registry.get<VertexIrradiance>(m == 0 ? world.floor : world.wall);
+            for (std::uint32_t v = 0; v < vi.irradiance.size(); ++v) {
+                if (!crossed[m][v]) {
+                    ASSERT_TRUE(bitEqual(vi.irradiance[v], before[m][v]))
+                        << "untouched vertex " << v << " changed in frame " << frame;
+                    ++untouchedChecked;
+                } else if (!bitEqual(vi.irradiance[v], before[m][v])) {
+                    ASSERT_TRUE(inDirtyRange(vi, v)) << "vertex " << v << " changed, not dirty";
+                    ++touchedChanged;
+                }
+            }
+        }
+    }
+    EXPECT_GT(untouchedChecked, 10'000u);
+    EXPECT_GT(touchedChanged, 1'000u);
+    EXPECT_GT(plateIncremental, 100u); // the still plate took incremental updates too
+
+    // A fresh system over the final ray set.
+    Registry& fresh = registry;
+    const std::vector<glm::vec3> floorInc = registry.get<VertexIrradiance>(world.floor).irradiance;
+    const std::vector<glm::vec3> wallInc = registry.get<VertexIrradiance>(world.wall).irradiance;
+    const std::vector<glm::vec3> plateInc = registry.get<VertexIrradiance>(world.plate).irradiance;
+    DetpIrradianceSystem reference(settings);
+    reference.build(fresh);
+    fresh.ctx().get<PhotonDelta>().full = true;
+    reference.update(fresh, {});
+
+    // Tolerance: a sum of n double additions is within (n - 1) 2^-53 T of the exact sum, T the
+    // sum of the magnitudes added; both sums here took at most `segmentsSeen` additions of at
+    // most 1.5 W a channel, so they differ by at most 2 n^2 1.5 2^-53 W. Each is then rounded
+    // once to float (2^-24 relative), so the published values may differ by 2^-23 relative.
+    const double n = double(segmentsSeen);
+    const double absolute = 2.0 * n * n * 1.5 * std::ldexp(1.0, -53) /
+                            (kPi * IncrementalWorld::kRadius * IncrementalWorld::kRadius);
+    const auto compare = [&](const std::vector<glm::vec3>& incremental, Entity e) {
+        const auto& full = fresh.get<VertexIrradiance>(e).irradiance;
+        ASSERT_EQ(incremental.size(), full.size());
+        for (std::size_t v = 0; v < full.size(); ++v)
+            for (int c = 0; c < 3; ++c)
+                ASSERT_NEAR(incremental[v][c], full[v][c],
+                            std::ldexp(double(std::abs(full[v][c])), -23) + absolute)
+                    << registry.get<Name>(e).value << " vertex " << v << " channel " << c;
+    };
+    compare(floorInc, world.floor);
+    compare(wallInc, world.wall);
+    compare(plateInc, world.plate);
+}
+
+TEST(Detp, DriftPolicySchedulesAFullReestimate) {
+    IncrementalWorld world;
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    PhotonStore& store = world.registry.ctx().get<PhotonStore>();
+    for (int i = 0; i < 2000; ++i)
+        appendPath(store,
+                   randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+    DetpSettings settings;
+    settings.discRadius = IncrementalWorld::kRadius;
+    settings.maxIncrementalUpdates = 50;
+    DetpIrradianceSystem system(settings);
+    system.build(world.registry);
+    system.update(world.registry, {});
+    // Incremental frames until some vertex has taken 50 additions; the frame after is full.
+    int frames = 0;
+    bool sawFull = false;
+    while (!sawFull && frames < 1000) {
+        randomDelta(rng, world, 40);
+        system.update(world.registry, {});
+        sawFull = system.lastFrame().full;
+        ++frames;
+    }
+    EXPECT_TRUE(sawFull);
+    EXPECT_GT(frames, 2); // 40 paths a frame cannot put 50 additions on one vertex at once
+}
+
+TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
+    // A 4 m floor with photons all over it and a small plate: the paths near the plate are a
+    // small part of the ray set.
+    Registry registry;
+    addResources(registry);
+    const Entity floor =
+        addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 4.f}, {4.f, 0.f, 0.f}, 40),
+                kIdentity, false, "floor");
+    const Entity plate =
+        addMesh(registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
+                glm::translate(kIdentity, {1.f, 0.5f, 1.f}), true, "plate");
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    for (int i = 0; i < 40'000; ++i) {
+        // Straight down onto the floor, then up and out of the scene.
+        const glm::vec3 o(4.f * unit(rng), 0.2f + 1.8f * unit(rng), 4.f * unit(rng));
+        glm::vec3 up = randomUnit(rng);
+        up.y = std::abs(up.y);
+        const Segment path[2] = {{o, {0.f, -1.f, 0.f}, o.y, glm::vec3(1e-3f), floor, 0, 0},
+                                 {{o.x, 0.f, o.z}, up, kInf, glm::vec3(5e-4f), {}, 0, 1}};
+        appendPath(store, path);
+    }
+    PhotonPathGrid& grid = registry.ctx().emplace<PhotonPathGrid>();
+    grid.build(store, Aabb{{0.f, 0.f, 0.f}, {4.f, 2.f, 4.f}}, 32);
+
+    DetpSettings settings;
+    settings.discRadius = 0.06f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    registry.clearChanges();
+
+    registry.patch<WorldTransform>(plate).matrix = glm::translate(kIdentity, {2.5f, 0.8f, 3.f});
+    registry.ctx().get<PhotonDelta>() = PhotonDelta{};
+    system.update(registry, {});
+    EXPECT_EQ(system.lastFrame().movedMobiles, 1u);
+    EXPECT_GT(system.lastFrame().crossings, 1000u);
+    EXPECT_LT(system.lastFrame().candidatePaths, store.pathCount() / 4);
+    const std::vector<glm::vec3> fromGrid = registry.get<VertexIrradiance>(plate).irradiance;
+
+    // The same plate estimated against every stored segment: the grid's candidates are summed in
+    // the same (path) order, so the values are the same bit for bit.
+    registry.ctx().erase<PhotonPathGrid>();
+    DetpIrradianceSystem reference(settings);
+    reference.build(registry);
+    reference.update(registry, {});
+    EXPECT_EQ(reference.lastFrame().candidatePaths, store.pathCount());
+    const auto& fromAll = registry.get<VertexIrradiance>(plate).irradiance;
+    ASSERT_EQ(fromGrid.size(), fromAll.size());
+    EXPECT_EQ(std::memcmp(fromGrid.data(), fromAll.data(), fromAll.size() * sizeof(glm::vec3)), 0);
+}
+
+TEST(Detp, SameInputGivesBitIdenticalOutputOnAnyThreadCount) {
+    std::vector<std::vector<glm::vec3>> results;
+    for (const std::size_t threads : {1u, 2u, 4u}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        IncrementalWorld world;
+        std::mt19937 rng(5);
+        std::uniform_real_distribution<float> unit(0.f, 1.f);
+        PhotonStore& store = world.registry.ctx().get<PhotonStore>();
+        for (int i = 0; i < 20'000; ++i)
+            appendPath(store,
+                       randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+        DetpSettings settings;
+        settings.discRadius = IncrementalWorld::kRadius;
+        DetpIrradianceSystem system(settings);
+        system.build(world.registry);
+        system.update(world.registry, {});
+        randomDelta(rng, world, 200);
+        system.update(world.registry, {});
+        results.push_back(world.registry.get<VertexIrradiance>(world.floor).irradiance);
+    }
+    for (std::size_t i = 1; i < results.size(); ++i)
+        ASSERT_EQ(std::memcmp(results[0].data(), results[i].data(),
+                              results[0].size() * sizeof(glm::vec3)),
+                  0);
+}
+
+// ---- set-up errors ------------------------------------------------------------------------
+
+TEST(Detp, RejectsBadSettings) {
+    const auto message = [](DetpSettings s) {
+        try {
+            DetpIrradianceSystem system(s);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    DetpSettings s;
+    s.discRadius = -1.f;
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.discRadius"));
+    s = {};
+    s.discRadius = std::nanf("");
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.discRadius"));
+    s = {};
+    s.photonMapNeighbours = 0;
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.photonMapNeighbours"));
+    s = {};
+    s.photonMapMaxRadius = kInf;
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.photonMapMaxRadius"));
+    s = {};
+    s.maxIncrementalUpdates = 0;
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.maxIncrementalUpdates"));
+    EXPECT_THROW(parseIrradianceEstimator("kernel"), Error);
+    EXPECT_EQ(parseIrradianceEstimator("photonmap"), IrradianceEstimator::PhotonMap);
+}
+
+TEST(Detp, DefaultRadiusComesFromTheScene) {
+    SceneInfo info;
+    info.maxEdgeLength = 0.02f;
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info), 0.01f);
+    info.maxEdgeLength = 0.f;
+    info.bounds.extend(glm::vec3(0.f));
+    info.bounds.extend(glm::vec3(3.f, 4.f, 0.f));
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info), 0.05f);
+    EXPECT_THROW(defaultDiscRadius(SceneInfo{}), Error);
+
+    Registry registry;
+    addResources(registry);
+    addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2), kIdentity,
+            false, "floor");
+    DetpIrradianceSystem system(DetpSettings{});
+    EXPECT_THROW(system.build(registry), Error); // radius 0 and no SceneInfo
+    registry.ctx().emplace<SceneInfo>().maxEdgeLength = 0.35f;
+    system.build(registry);
+    EXPECT_FLOAT_EQ(system.discRadius(), 0.175f);
+}
+
+TEST(Detp, RejectsMeshesItCannotUse) {
+    const auto buildError = [](Mesh mesh) {
+        Registry registry;
+        addResources(registry);
+        addMesh(registry, std::move(mesh), kIdentity, false, "bad");
+        DetpSettings settings;
+        settings.discRadius = 0.1f;
+        DetpIrradianceSystem system(settings);
+        try {
+            system.build(registry);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    const Mesh good = gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 1);
+    Mesh noNormals = good;
+    noNormals.normals.clear();
+    EXPECT_THAT(buildError(noNormals), HasSubstr("'bad': Mesh.normals has 0 entries"));
+    Mesh zeroNormal = good;
+    zeroNormal.normals[2] = glm::vec3(0.f);
+    EXPECT_THAT(buildError(zeroNormal), HasSubstr("Mesh.normals[2]"));
+    Mesh badIndex = good;
+    badIndex.indices[4] = 99;
+    EXPECT_THAT(buildError(badIndex), HasSubstr("Mesh.indices[4] = 99"));
+    Mesh nanPosition = good;
+    nanPosition.positions[1].x = std::nanf("");
+    EXPECT_THAT(buildError(nanPosition), HasSubstr("Mesh.positions[1]"));
+}
+
+} // namespace
+} // namespace qgi

@@ -1,0 +1,276 @@
+#include "systems/detp/DiscIndex.h"
+
+#include "runtime/core/Error.h"
+#include "runtime/raytrace/EmbreeDevice.h"
+#include "systems/detp/DiscCrossing.h"
+#include "systems/photon_update/PhotonStore.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <vector>
+
+namespace qgi {
+namespace {
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+glm::vec3 randomUnit(std::mt19937& rng) {
+    std::normal_distribution<float> normal;
+    glm::vec3 v;
+    do {
+        v = {normal(rng), normal(rng), normal(rng)};
+    } while (glm::dot(v, v) < 1e-6f);
+    return glm::normalize(v);
+}
+
+void addSegment(PhotonSegments& s, const glm::vec3& origin, const glm::vec3& direction,
+                float length, std::uint8_t bounce) {
+    s.origin.push_back(origin);
+    s.direction.push_back(direction);
+    s.length.push_back(length);
+    s.power.push_back(glm::vec3(1.f));
+    s.hitEntity.push_back(std::isinf(length) ? Entity{} : Entity{0, 0});
+    s.hitPrimitive.push_back(0);
+    s.bounce.push_back(bounce);
+}
+
+struct Discs {
+    std::vector<glm::vec3> centers;
+    std::vector<glm::vec3> normals;
+};
+
+Discs randomDiscs(std::mt19937& rng, std::size_t n) {
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    Discs discs;
+    for (std::size_t i = 0; i < n; ++i) {
+        discs.centers.push_back({unit(rng), unit(rng), unit(rng)});
+        discs.normals.push_back(randomUnit(rng));
+    }
+    return discs;
+}
+
+/// Three kinds, a third each: segments that left the scene (length +inf), segments of random
+/// length, and segments that end on a disc's plane near the disc (as a photon landing on the
+/// vertex's own surface does), from either side.
+PhotonSegments randomSegments(std::mt19937& rng, const Discs& discs, float radius, std::size_t n) {
+    std::uniform_real_distribution<float> box(-0.2f, 1.2f);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::uniform_int_distribution<std::size_t> pick(0, discs.centers.size() - 1);
+    std::uniform_int_distribution<int> bounce(0, 2);
+    PhotonSegments segments;
+    for (std::size_t i = 0; i < n; ++i) {
+        const auto b = std::uint8_t(bounce(rng));
+        if (i % 3 == 0) {
+            addSegment(segments, {box(rng), box(rng), box(rng)}, randomUnit(rng), kInf, b);
+        } else if (i % 3 == 1) {
+            addSegment(segments, {box(rng), box(rng), box(rng)}, randomUnit(rng), 1.5f * unit(rng),
+                       b);
+        } else {
+            const std::size_t j = pick(rng);
+            // A point of the disc's plane within 1.2 r of its centre: inside and just outside.
+            const glm::vec3 tangent = glm::normalize(glm::cross(discs.normals[j], randomUnit(rng)));
+            const glm::vec3 end =
+                discs.centers[j] + (1.2f * radius * std::sqrt(unit(rng))) * tangent;
+            const glm::vec3 d = randomUnit(rng);
+            const float length = 0.1f + unit(rng);
+            addSegment(segments, end - length * d, d, length, b);
+        }
+    }
+    return segments;
+}
+
+std::vector<DiscCrossing> bruteForce(const PhotonSegments& segments,
+                                     const std::vector<std::uint32_t>& indices, const Discs& discs,
+                                     float radius, bool skipDirect) {
+    std::vector<DiscCrossing> out;
+    for (const std::uint32_t s : indices) {
+        if (skipDirect && segments.bounce[s] == 0) continue;
+        for (std::uint32_t d = 0; d < discs.centers.size(); ++d)
+            if (crossesDisc(segments.origin[s], segments.direction[s], segments.length[s],
+                            discs.centers[d], discs.normals[d], radius))
+                out.push_back({s, d});
+    }
+    return out;
+}
+
+bool operator==(const DiscCrossing& a, const DiscCrossing& b) {
+    return a.segment == b.segment && a.disc == b.disc;
+}
+
+void expectSamePairs(const std::vector<DiscCrossing>& actual,
+                     const std::vector<DiscCrossing>& expected) {
+    ASSERT_EQ(actual.size(), expected.size());
+    for (std::size_t i = 0; i < actual.size(); ++i)
+        ASSERT_TRUE(actual[i] == expected[i])
+            << "pair " << i << ": index (" << actual[i].segment << ", " << actual[i].disc
+            << "), brute force (" << expected[i].segment << ", " << expected[i].disc << ")";
+}
+
+TEST(DetpCrossing, CountsOnlySegmentsFromTheFront) {
+    const glm::vec3 center(0.f), up(0.f, 0.f, 1.f);
+    // Straight down through the centre: from the front. Straight up: from behind.
+    EXPECT_TRUE(crossesDisc({0.f, 0.f, 1.f}, {0.f, 0.f, -1.f}, 2.f, center, up, 0.1f));
+    EXPECT_FALSE(crossesDisc({0.f, 0.f, -1.f}, {0.f, 0.f, 1.f}, 2.f, center, up, 0.1f));
+    // Parallel to the plane, in it: never a crossing.
+    EXPECT_FALSE(crossesDisc({-1.f, 0.f, 0.f}, {1.f, 0.f, 0.f}, 2.f, center, up, 0.1f));
+}
+
+TEST(DetpCrossing, SegmentRangeAndRadius) {
+    const glm::vec3 center(0.f), up(0.f, 0.f, 1.f), down(0.f, 0.f, -1.f);
+    // Escaped segments count; a segment that stops short of the plane does not.
+    EXPECT_TRUE(crossesDisc({0.f, 0.f, 1.f}, down, kInf, center, up, 0.1f));
+    EXPECT_FALSE(crossesDisc({0.f, 0.f, 1.f}, down, 0.9f, center, up, 0.1f));
+    // Landing on the plane counts, with the documented slack past the end but no more.
+    EXPECT_TRUE(crossesDisc({0.f, 0.f, 1.f}, down, 1.f, center, up, 0.1f));
+    EXPECT_TRUE(crossesDisc({0.f, 0.f, 1.f}, down, 1.f - 0.5f * kDiscEndTolerance * 0.1f, center,
+                            up, 0.1f));
+    EXPECT_FALSE(
+        crossesDisc({0.f, 0.f, 1.f}, down, 1.f - 2.f * kDiscEndTolerance * 0.1f, center, up, 0.1f));
+    // A segment that starts below the plane never reaches it.
+    EXPECT_FALSE(crossesDisc({0.f, 0.f, -0.5f}, down, kInf, center, up, 0.1f));
+    // Radius: inclusive at r, exclusive beyond.
+    EXPECT_TRUE(crossesDisc({0.0999f, 0.f, 1.f}, down, 2.f, center, up, 0.1f));
+    EXPECT_FALSE(crossesDisc({0.1001f, 0.f, 1.f}, down, 2.f, center, up, 0.1f));
+}
+
+TEST(DetpDiscIndex, FrontSideRuleThroughEmbree) {
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    const std::vector<glm::vec3> centers{{0.f, 0.f, 0.f}};
+    const std::vector<glm::vec3> normals{{0.f, 0.f, 1.f}};
+    index.build(centers, normals, 0.1f);
+    PhotonSegments segments;
+    addSegment(segments, {0.f, 0.f, 1.f}, {0.f, 0.f, -1.f}, kInf, 1);  // from the front
+    addSegment(segments, {0.f, 0.f, -1.f}, {0.f, 0.f, 1.f}, kInf, 1);  // from behind
+    addSegment(segments, {0.05f, 0.f, 1.f}, {0.f, 0.f, -1.f}, 1.f, 1); // lands on the disc
+    const std::vector<std::uint32_t> indices{0, 1, 2};
+    std::vector<DiscCrossing> out;
+    index.collectCrossings(segments, indices, false, out);
+    ASSERT_EQ(out.size(), 2u);
+    EXPECT_EQ(out[0].segment, 0u);
+    EXPECT_EQ(out[1].segment, 2u);
+}
+
+class DiscIndexVsBruteForce : public ::testing::TestWithParam<bool> {};
+
+TEST_P(DiscIndexVsBruteForce, SamePairsInTheSameOrder) {
+    const bool skipDirect = GetParam();
+    std::mt19937 rng(20240611);
+    constexpr float kRadius = 0.05f;
+    const Discs discs = randomDiscs(rng, 3000);
+    const PhotonSegments segments = randomSegments(rng, discs, kRadius, 6000);
+    // A shuffled subset of the segments: the index must map positions back to segments.
+    std::vector<std::uint32_t> indices(segments.size());
+    std::iota(indices.begin(), indices.end(), 0u);
+    std::shuffle(indices.begin(), indices.end(), rng);
+    indices.resize(5000);
+
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    std::vector<DiscCrossing> actual;
+    index.collectCrossings(segments, indices, skipDirect, actual);
+    const std::vector<DiscCrossing> expected =
+        bruteForce(segments, indices, discs, kRadius, skipDirect);
+    expectSamePairs(actual, expected);
+
+    // The comparison covers every kind of segment: escaped ones and landings on a disc plane.
+    std::size_t escaped = 0, landed = 0;
+    for (const DiscCrossing& c : expected) {
+        if (std::isinf(segments.length[c.segment])) ++escaped;
+        if (c.segment % 3 == 2) ++landed;
+    }
+    EXPECT_GT(escaped, 100u);
+    EXPECT_GT(landed, 100u);
+}
+
+INSTANTIATE_TEST_SUITE_P(DetpDiscIndex, DiscIndexVsBruteForce, ::testing::Bool());
+
+TEST(DetpDiscIndex, CrossingsBeyondALengthAreThoseACutCopyMisses) {
+    std::mt19937 rng(31);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    constexpr float kRadius = 0.05f;
+    const Discs discs = randomDiscs(rng, 2000);
+    const PhotonSegments segments = randomSegments(rng, discs, kRadius, 6000);
+    std::vector<std::uint32_t> indices(segments.size());
+    std::iota(indices.begin(), indices.end(), 0u);
+    // Cut lengths: none (-inf), inside the segment, and right at its end.
+    std::vector<float> beyond(segments.size());
+    for (std::size_t s = 0; s < beyond.size(); ++s) {
+        const float length = std::isinf(segments.length[s]) ? 2.f : segments.length[s];
+        beyond[s] = s % 3 == 0 ? -kInf : s % 3 == 1 ? length * unit(rng) : segments.length[s];
+    }
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    std::vector<DiscCrossing> actual;
+    index.collectCrossings(segments, indices, false, actual, beyond);
+
+    std::vector<DiscCrossing> expected;
+    std::size_t cut = 0;
+    for (const DiscCrossing& c : bruteForce(segments, indices, discs, kRadius, false)) {
+        const std::uint32_t s = c.segment;
+        if (crossesDisc(segments.origin[s], segments.direction[s], beyond[s], discs.centers[c.disc],
+                        discs.normals[c.disc], kRadius)) {
+            ++cut;
+            continue;
+        }
+        expected.push_back(c);
+    }
+    EXPECT_GT(cut, 200u);
+    expectSamePairs(actual, expected);
+}
+
+TEST(DetpDiscIndex, MovedDiscsMatchBruteForce) {
+    std::mt19937 rng(7);
+    constexpr float kRadius = 0.04f;
+    Discs discs = randomDiscs(rng, 500);
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Moving);
+    index.build(discs.centers, discs.normals, kRadius);
+    for (int step = 0; step < 3; ++step) {
+        for (glm::vec3& c : discs.centers)
+            c += glm::vec3(0.1f, -0.05f, 0.02f);
+        for (glm::vec3& n : discs.normals)
+            n = randomUnit(rng);
+        index.move(discs.centers, discs.normals);
+        const PhotonSegments segments = randomSegments(rng, discs, kRadius, 3000);
+        std::vector<std::uint32_t> indices(segments.size());
+        std::iota(indices.begin(), indices.end(), 0u);
+        std::vector<DiscCrossing> actual;
+        index.collectCrossings(segments, indices, false, actual);
+        const auto expected = bruteForce(segments, indices, discs, kRadius, false);
+        EXPECT_GT(expected.size(), 500u);
+        expectSamePairs(actual, expected);
+    }
+}
+
+TEST(DetpDiscIndex, RejectsBadInput) {
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    const std::vector<glm::vec3> centers{{0.f, 0.f, 0.f}};
+    const std::vector<glm::vec3> normals{{0.f, 0.f, 1.f}};
+    EXPECT_THROW(index.build(centers, normals, 0.f), Error);
+    EXPECT_THROW(index.build(centers, normals, kInf), Error);
+    const std::vector<glm::vec3> nan{{std::nanf(""), 0.f, 0.f}};
+    EXPECT_THROW(index.build(nan, normals, 0.1f), Error);
+    // An empty index finds nothing.
+    index.build({}, {}, 0.1f);
+    PhotonSegments segments;
+    addSegment(segments, {0.f, 0.f, 1.f}, {0.f, 0.f, -1.f}, kInf, 1);
+    const std::vector<std::uint32_t> indices{0};
+    std::vector<DiscCrossing> out{{5, 5}};
+    index.collectCrossings(segments, indices, false, out);
+    EXPECT_TRUE(out.empty());
+}
+
+} // namespace
+} // namespace qgi

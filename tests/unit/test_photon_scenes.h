@@ -1,0 +1,162 @@
+#pragma once
+// Small hand-built scenes for the photon tests: meshes, registries, frames.
+
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/Name.h"
+#include "components/PointLight.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/ecs/FrameContext.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "systems/photon_update/PhotonUpdateSystem.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+
+namespace qgi::test {
+
+inline glm::mat4 translation(const glm::vec3& t) {
+    return glm::translate(glm::mat4(1.f), t);
+}
+
+/// Axis-aligned box centred on the origin: 12 triangles facing outwards, or inwards (a room).
+/// `openTop` leaves out the +y face.
+inline Mesh boxMesh(const glm::vec3& half, bool inward = false, bool openTop = false) {
+    Mesh mesh;
+    for (int i = 0; i < 8; ++i)
+        mesh.positions.push_back(
+            {i & 1 ? half.x : -half.x, i & 2 ? half.y : -half.y, i & 4 ? half.z : -half.z});
+    for (int axis = 0; axis < 3; ++axis) {
+        for (int side = 0; side < 2; ++side) {
+            if (openTop && axis == 1 && side == 1) continue;
+            const int bitA = 1 << ((axis + 1) % 3), bitB = 1 << ((axis + 2) % 3);
+            const int base = side ? 1 << axis : 0;
+            const std::uint32_t c[4] = {std::uint32_t(base), std::uint32_t(base | bitA),
+                                        std::uint32_t(base | bitA | bitB),
+                                        std::uint32_t(base | bitB)};
+            glm::vec3 outward(0.f);
+            outward[axis] = side ? 1.f : -1.f;
+            const glm::vec3 n = glm::cross(mesh.positions[c[1]] - mesh.positions[c[0]],
+                                           mesh.positions[c[2]] - mesh.positions[c[0]]);
+            const bool flip = (glm::dot(n, outward) < 0.f) != inward;
+            if (flip)
+                mesh.indices.insert(mesh.indices.end(), {c[0], c[2], c[1], c[0], c[3], c[2]});
+            else
+                mesh.indices.insert(mesh.indices.end(), {c[0], c[1], c[2], c[0], c[2], c[3]});
+        }
+    }
+    for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+        mesh.normals.push_back(glm::normalize(mesh.positions[i]));
+    return mesh;
+}
+
+inline Material grey(float albedo) {
+    Material m;
+    m.baseColor = glm::vec3(albedo);
+    return m;
+}
+
+inline Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world,
+                      const Material& material, bool mobile, const char* name) {
+    const Entity e = registry.create();
+    registry.emplace<Name>(e, name);
+    registry.emplace<Mesh>(e, std::move(mesh));
+    registry.emplace<WorldTransform>(e, world);
+    registry.emplace<Material>(e, material);
+    if (mobile)
+        registry.emplace<MobileMesh>(e);
+    else
+        registry.emplace<StaticMesh>(e);
+    return e;
+}
+
+inline Entity addPointLight(Registry& registry, const glm::vec3& at, float intensity,
+                            const glm::vec3& color = glm::vec3(1.f)) {
+    const Entity e = registry.create();
+    registry.emplace<WorldTransform>(e, translation(at));
+    registry.emplace<PointLight>(e, PointLight{color, intensity});
+    return e;
+}
+
+/// Builds the RayScene world resource from the registry's meshes.
+inline RayScene& buildRayScene(Registry& registry) {
+    RayScene& scene = registry.ctx().emplace<RayScene>();
+    scene.build(registry);
+    return scene;
+}
+
+/// A room open at the top (some photons escape) with a static pillar, a point light and two
+/// mobile cubes; the frame's first update is left to the caller.
+struct Room {
+    Entity walls, pillar, cube, crate, light;
+};
+
+inline Room buildRoom(Registry& registry, const glm::vec3& cubeAt, const glm::vec3& crateAt) {
+    Room room;
+    room.walls = addMesh(registry, boxMesh({2.f, 1.5f, 2.f}, true, true), glm::mat4(1.f),
+                         grey(0.7f), false, "walls");
+    Material red;
+    red.baseColor = {0.8f, 0.3f, 0.2f};
+    room.pillar = addMesh(registry, boxMesh({0.2f, 1.5f, 0.2f}), translation({1.f, 0.f, 1.f}), red,
+                          false, "pillar");
+    room.cube =
+        addMesh(registry, boxMesh(glm::vec3(0.25f)), translation(cubeAt), grey(0.6f), true, "cube");
+    room.crate = addMesh(registry, boxMesh(glm::vec3(0.2f)), translation(crateAt), grey(0.5f), true,
+                         "crate");
+    room.light = addPointLight(registry, {0.f, 1.2f, 0.f}, 10.f);
+    return room;
+}
+
+/// One frame the way the schedule runs it: the pose change is recorded, the ray scene synced,
+/// then the photon system updates; the change lists are cleared at the end.
+inline void moveAndUpdate(Registry& registry, PhotonUpdateSystem& system, Entity mobile,
+                          const glm::mat4& pose, std::uint64_t frameIndex) {
+    registry.patch<WorldTransform>(mobile).matrix = pose;
+    registry.ctx().get<RayScene>().syncMoved(registry);
+    system.update(registry, FrameContext{frameIndex, 0.0, 0.f, 0});
+    registry.clearChanges();
+}
+
+inline void firstUpdate(Registry& registry, PhotonUpdateSystem& system) {
+    system.update(registry, FrameContext{});
+    registry.clearChanges();
+}
+
+/// Bitwise equality of segment s of a and segment t of b, every field.
+inline bool sameSegment(const PhotonSegments& a, std::size_t s, const PhotonSegments& b,
+                        std::size_t t) {
+    const auto same = [](const auto& x, const auto& y) {
+        return std::memcmp(&x, &y, sizeof x) == 0;
+    };
+    return same(a.origin[s], b.origin[t]) && same(a.direction[s], b.direction[t]) &&
+           same(a.length[s], b.length[t]) && same(a.power[s], b.power[t]) &&
+           a.hitEntity[s] == b.hitEntity[t] && a.hitPrimitive[s] == b.hitPrimitive[t] &&
+           a.bounce[s] == b.bounce[t];
+}
+
+/// Every path of a equals the same path of b, bit for bit (wherever the stores keep them).
+inline ::testing::AssertionResult sameStore(const PhotonStore& a, const PhotonStore& b) {
+    if (a.pathCount() != b.pathCount())
+        return ::testing::AssertionFailure()
+               << a.pathCount() << " vs " << b.pathCount() << " paths";
+    for (std::size_t p = 0; p < a.pathCount(); ++p) {
+        const PhotonPath& pa = a.paths[p];
+        const PhotonPath& pb = b.paths[p];
+        if (pa.count != pb.count || pa.light != pb.light)
+            return ::testing::AssertionFailure()
+                   << "path " << p << ": " << pa.count << " vs " << pb.count << " segments";
+        for (std::size_t k = 0; k < pa.count; ++k)
+            if (!sameSegment(a.segments, pa.first + k, b.segments, pb.first + k))
+                return ::testing::AssertionFailure() << "path " << p << " differs at segment " << k;
+    }
+    return ::testing::AssertionSuccess();
+}
+
+} // namespace qgi::test

@@ -1,0 +1,474 @@
+// The photon update system: determinism, the quasi-static update against brute force and
+// against a full re-shoot, moving lights, energy in a closed box, settings checks.
+#include "systems/photon_update/PhotonUpdateSystem.h"
+
+#include "runtime/core/Error.h"
+#include "systems/photon_update/PhotonPathGrid.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "systems/photon_update/PhotonTracer.h"
+#include "test_photon_scenes.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <glm/gtc/quaternion.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+namespace qgi {
+namespace {
+
+using test::buildRayScene;
+using test::buildRoom;
+using test::firstUpdate;
+using test::sameSegment;
+using test::sameStore;
+using test::translation;
+using ::testing::HasSubstr;
+
+const glm::vec3 kCubeRest(-0.8f, -1.25f, -0.5f);
+const glm::vec3 kCrateRest(0.6f, -1.3f, -0.9f);
+
+PhotonSettings settingsWith(std::uint32_t photons) {
+    PhotonSettings s;
+    s.photonCount = photons;
+    s.seed = 42;
+    s.gridResolution = 24;
+    return s;
+}
+
+const PhotonStore& storeOf(const Registry& r) {
+    return r.ctx().get<PhotonStore>();
+}
+const PhotonDelta& deltaOf(const Registry& r) {
+    return r.ctx().get<PhotonDelta>();
+}
+
+/// A random pose inside the room: anywhere on or above the floor, turned about a random axis.
+glm::mat4 randomPose(std::mt19937& rng, float half) {
+    std::uniform_real_distribution<float> x(-1.9f + half, 1.9f - half), y(-1.5f + half, 0.8f);
+    std::uniform_real_distribution<float> angle(-3.1f, 3.1f);
+    std::normal_distribution<float> axis;
+    const glm::vec3 a = glm::normalize(glm::vec3(axis(rng), axis(rng), axis(rng)) + 1e-3f);
+    return translation({x(rng), y(rng), x(rng)}) * glm::mat4_cast(glm::angleAxis(angle(rng), a));
+}
+
+/// Moves several mobiles in one frame, the way the schedule does, then updates.
+void moveAll(Registry& registry, PhotonUpdateSystem& system,
+             const std::vector<std::pair<Entity, glm::mat4>>& moves, std::uint64_t frame) {
+    for (const auto& [e, pose] : moves)
+        registry.patch<WorldTransform>(e).matrix = pose;
+    registry.ctx().get<RayScene>().syncMoved(registry);
+    system.update(registry, FrameContext{frame, 0.0, 0.f, 0});
+    registry.clearChanges();
+}
+
+/// Brute force over every stored segment: the first segment of each path that hit one of
+/// `moved` (at its old pose, as recorded) or crosses it at its new pose; -1 when none.
+std::vector<int> bruteForceFirstAffected(const PhotonStore& before, const RayScene& scene,
+                                         const std::vector<std::pair<Entity, glm::mat4>>& moved) {
+    std::vector<int> first(before.pathCount(), -1);
+    for (std::size_t p = 0; p < before.pathCount(); ++p) {
+        const PhotonPath& path = before.paths[p];
+        for (int k = 0; k < path.count && first[p] < 0; ++k) {
+            const std::size_t s = path.first + std::size_t(k);
+            const Ray ray{before.segments.origin[s], 0.f, before.segments.direction[s],
+                          before.segments.length[s]};
+            for (const auto& [e, pose] : moved)
+                if (before.segments.hitEntity[s] == e || scene.intersectMobile(e, pose, ray))
+                    first[p] = k;
+        }
+    }
+    return first;
+}
+
+/// Checks one frame's delta against the store before and after it and the brute-force set.
+void expectExactDelta(const PhotonStore& before, const PhotonStore& after, const PhotonDelta& delta,
+                      const std::vector<int>& expectedFirst) {
+    ASSERT_FALSE(delta.full);
+    ASSERT_EQ(delta.oldFirst.size(), delta.paths.size() + 1);
+    ASSERT_EQ(delta.newFirst.size(), delta.paths.size() + 1);
+    std::vector<int> first(before.pathCount(), -1);
+    for (std::size_t i = 0; i < delta.paths.size(); ++i) {
+        const std::uint32_t p = delta.paths[i];
+        ASSERT_EQ(first[p], -1) << "path " << p << " listed twice";
+        const PhotonPath& old = before.paths[p];
+        const PhotonPath& now = after.paths[p];
+        const std::size_t oldSuffix = delta.oldFirst[i + 1] - delta.oldFirst[i];
+        const std::size_t newSuffix = delta.newFirst[i + 1] - delta.newFirst[i];
+        ASSERT_GE(old.count, oldSuffix);
+        ASSERT_GT(newSuffix, 0u);
+        const std::size_t k = old.count - oldSuffix;
+        first[p] = int(k);
+        ASSERT_EQ(now.count, k + newSuffix);
+        // (b) the prefix is bit-identical; the old suffix is what the store held.
+        for (std::size_t j = 0; j < k; ++j)
+            ASSERT_TRUE(sameSegment(before.segments, old.first + j, after.segments, now.first + j));
+        for (std::size_t j = 0; j < oldSuffix; ++j)
+            ASSERT_TRUE(sameSegment(before.segments, old.first + k + j, delta.oldSegments,
+                                    delta.oldFirst[i] + j));
+        for (std::size_t j = 0; j < newSuffix; ++j)
+            ASSERT_TRUE(sameSegment(after.segments, now.first + k + j, delta.newSegments,
+                                    delta.newFirst[i] + j));
+        // (c) the heads of both suffixes are the same ray with the same power.
+        const std::size_t o = delta.oldFirst[i], n = delta.newFirst[i];
+        EXPECT_EQ(delta.oldSegments.origin[o], delta.newSegments.origin[n]);
+        EXPECT_EQ(delta.oldSegments.direction[o], delta.newSegments.direction[n]);
+        EXPECT_EQ(delta.oldSegments.power[o], delta.newSegments.power[n]);
+        EXPECT_EQ(delta.oldSegments.bounce[o], delta.newSegments.bounce[n]);
+    }
+    // (a) exactly the brute-force paths, each from its first affected segment; every other
+    // path is untouched.
+    EXPECT_EQ(first, expectedFirst);
+    for (std::size_t p = 0; p < before.pathCount(); ++p) {
+        if (first[p] >= 0) continue;
+        ASSERT_EQ(before.paths[p].count, after.paths[p].count);
+        for (std::size_t j = 0; j < before.paths[p].count; ++j)
+            ASSERT_TRUE(sameSegment(before.segments, before.paths[p].first + j, after.segments,
+                                    after.paths[p].first + j));
+    }
+}
+
+/// (d) Re-tracing every stored segment through the current scene finds its recorded hit.
+void expectHitsReproduce(const PhotonStore& store, const RayScene& scene) {
+    std::size_t checked = 0;
+    for (const PhotonPath& path : store.paths)
+        for (std::size_t s = path.first; s < path.first + path.count; ++s, ++checked) {
+            const std::optional<Hit> hit =
+                scene.intersect(Ray{store.segments.origin[s], 0.f, store.segments.direction[s],
+                                    std::numeric_limits<float>::infinity()});
+            ASSERT_EQ(hit.has_value(), bool(store.segments.hitEntity[s])) << "segment " << s;
+            if (!hit) continue;
+            ASSERT_EQ(hit->entity, store.segments.hitEntity[s]) << "segment " << s;
+            ASSERT_EQ(hit->primitive, store.segments.hitPrimitive[s]) << "segment " << s;
+            ASSERT_EQ(hit->t, store.segments.length[s]) << "segment " << s;
+        }
+    EXPECT_GT(checked, store.pathCount());
+}
+
+// ---- determinism -------------------------------------------------------------------------------
+
+TEST(PhotonUpdate, SameSeedGivesABitIdenticalStoreAnotherSeedDoesNot) {
+    const auto shoot = [](Registry& r, std::uint64_t seed) {
+        buildRoom(r, kCubeRest, kCrateRest);
+        buildRayScene(r);
+        PhotonSettings s = settingsWith(20'000);
+        s.seed = seed;
+        PhotonUpdateSystem system(s);
+        firstUpdate(r, system);
+        return &storeOf(r);
+    };
+    Registry a, b, c;
+    const PhotonStore& x = *shoot(a, 5);
+    const PhotonStore& y = *shoot(b, 5);
+    const PhotonStore& z = *shoot(c, 6);
+    EXPECT_TRUE(deltaOf(a).full);
+    ASSERT_EQ(x.pathCount(), 20'000u);
+    EXPECT_TRUE(sameStore(x, y));
+    ASSERT_EQ(x.segments.size(), y.segments.size()); // and the same layout
+    for (std::size_t s = 0; s < x.segments.size(); ++s)
+        ASSERT_TRUE(sameSegment(x.segments, s, y.segments, s));
+    EXPECT_FALSE(sameStore(x, z));
+}
+
+TEST(PhotonUpdate, RetracingFromAnyStoredSegmentReproducesTheRestOfThePath) {
+    Registry registry;
+    buildRoom(registry, kCubeRest, kCrateRest);
+    const RayScene& scene = buildRayScene(registry);
+    const PhotonSettings settings = settingsWith(5'000);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore& store = storeOf(registry);
+
+    // The tracer's inputs rebuilt here: albedo by entity index.
+    std::vector<glm::vec3> albedo;
+    registry.view<const Material>().each([&](Entity e, const Material& m) {
+        if (e.index >= albedo.size()) albedo.resize(e.index + 1, glm::vec3(0.f));
+        albedo[e.index] = m.baseColor;
+    });
+    const PhotonTracer::Surfaces surfaces{settings.seed, settings.maxBounces, albedo};
+    PhotonTracer tracer;
+    std::size_t longPaths = 0;
+    for (std::uint32_t k = 0; k < 4; ++k) {
+        std::vector<std::uint32_t> paths;
+        for (std::uint32_t p = 0; p < store.pathCount(); ++p)
+            if (store.paths[p].count > k) paths.push_back(p);
+        if (k > 1) longPaths += paths.size();
+        PhotonSegments out;
+        std::vector<std::uint32_t> ends{0};
+        tracer.trace(
+            scene, surfaces, paths.size(),
+            [&](std::size_t i) {
+                const std::size_t s = store.segmentIndex(paths[i], k);
+                return PhotonHead{store.segments.origin[s], store.segments.direction[s],
+                                  store.segments.power[s], paths[i], store.segments.bounce[s]};
+            },
+            out, ends);
+        for (std::size_t i = 0; i < paths.size(); ++i) {
+            const PhotonPath& path = store.paths[paths[i]];
+            ASSERT_EQ(ends[i + 1] - ends[i], path.count - k) << "path " << paths[i];
+            for (std::size_t j = 0; j < path.count - k; ++j)
+                ASSERT_TRUE(sameSegment(out, ends[i] + j, store.segments, path.first + k + j));
+        }
+    }
+    EXPECT_GT(longPaths, 1000u); // the deeper starts were exercised
+}
+
+// ---- the quasi-static update
+// ---------------------------------------------------------------------
+
+TEST(PhotonUpdate, RandomMovesRetraceExactlyTheAffectedPathsAndMatchAFullReshoot) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const RayScene& scene = buildRayScene(registry);
+    PhotonSettings settings = settingsWith(20'000);
+    settings.compactionFraction = 0.2f; // exercise compaction on the way
+    settings.gridRefreshBudget = 1;     // and keep many paths in the grid's changed set
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+
+    std::mt19937 rng(2024);
+    std::size_t retraced = 0, bothMoved = 0, compactions = 0;
+    glm::mat4 cubePose = translation(kCubeRest), cratePose = translation(kCrateRest);
+    for (std::uint64_t frame = 1; frame <= 24; ++frame) {
+        std::vector<std::pair<Entity, glm::mat4>> moves;
+        // Every third frame both mobiles move; otherwise one, alternately.
+        if (frame % 3 == 0 || frame % 2 == 0) moves.emplace_back(room.cube, randomPose(rng, 0.45f));
+        if (frame % 3 == 0 || frame % 2 == 1)
+            moves.emplace_back(room.crate, randomPose(rng, 0.35f));
+        bothMoved += moves.size() == 2 ? 1 : 0;
+        const PhotonStore before = storeOf(registry);
+        moveAll(registry, system, moves, frame);
+        for (const auto& [e, pose] : moves)
+            (e == room.cube ? cubePose : cratePose) = pose;
+        const std::vector<int> expected = bruteForceFirstAffected(before, scene, moves);
+        expectExactDelta(before, storeOf(registry), deltaOf(registry), expected);
+        EXPECT_EQ(deltaOf(registry).movedMobiles.size(), moves.size());
+        retraced += deltaOf(registry).paths.size();
+        compactions += system.lastFrame().compacted ? 1 : 0;
+        if (HasFatalFailure()) return;
+    }
+    EXPECT_GT(retraced, 2'000u);
+    EXPECT_GT(bothMoved, 5u);
+    EXPECT_GT(compactions, 0u);
+    expectHitsReproduce(storeOf(registry), scene);
+
+    // The same scene shot from scratch with the mobiles where they ended: the same ray set.
+    Registry fresh;
+    const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
+    fresh.patch<WorldTransform>(again.cube).matrix = cubePose;
+    fresh.patch<WorldTransform>(again.crate).matrix = cratePose;
+    buildRayScene(fresh);
+    PhotonUpdateSystem full(settings);
+    firstUpdate(fresh, full);
+    EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+}
+
+TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
+    Registry incremental, baseline;
+    const test::Room a = buildRoom(incremental, kCubeRest, kCrateRest);
+    const test::Room b = buildRoom(baseline, kCubeRest, kCrateRest);
+    buildRayScene(incremental);
+    buildRayScene(baseline);
+    PhotonSettings settings = settingsWith(10'000);
+    PhotonUpdateSystem fast(settings);
+    settings.fullRecompute = true;
+    PhotonUpdateSystem slow(settings);
+    firstUpdate(incremental, fast);
+    firstUpdate(baseline, slow);
+    const std::uint64_t generation = storeOf(baseline).generation;
+    // The cornell benchmark's motion: 1 cm per frame.
+    for (std::uint64_t frame = 1; frame <= 10; ++frame) {
+        const glm::mat4 pose = translation(kCubeRest + glm::vec3(0.01f * float(frame), 0.f, 0.f));
+        test::moveAndUpdate(incremental, fast, a.cube, pose, frame);
+        test::moveAndUpdate(baseline, slow, b.cube, pose, frame);
+        EXPECT_FALSE(deltaOf(incremental).full);
+        EXPECT_FALSE(deltaOf(incremental).empty());
+        EXPECT_TRUE(deltaOf(baseline).full);
+        ASSERT_TRUE(sameStore(storeOf(incremental), storeOf(baseline))) << "frame " << frame;
+    }
+    EXPECT_EQ(storeOf(baseline).generation, generation + 10);
+}
+
+TEST(PhotonUpdate, AMobileFarFromEveryPathChangesNothing) {
+    // A closed room: no photon leaves it, and the crate moves about outside.
+    Registry registry;
+    test::addMesh(registry, test::boxMesh({2.f, 1.5f, 2.f}, true), glm::mat4(1.f), test::grey(0.7f),
+                  false, "closed room");
+    const Entity crate =
+        test::addMesh(registry, test::boxMesh(glm::vec3(0.3f)), translation({6.f, 0.f, 0.f}),
+                      test::grey(0.5f), true, "crate outside");
+    test::addPointLight(registry, {0.f, 1.f, 0.f}, 5.f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(10'000));
+    firstUpdate(registry, system);
+    const PhotonStore before = storeOf(registry);
+    for (const glm::vec3 at : {glm::vec3(6.f, 1.f, 0.f), glm::vec3(5.f, -1.f, 3.f)}) {
+        test::moveAndUpdate(registry, system, crate, translation(at), 1);
+        EXPECT_TRUE(deltaOf(registry).empty());
+        EXPECT_EQ(system.lastFrame().movedMobiles, 1u);
+        EXPECT_EQ(system.lastFrame().candidatePaths, 0u); // the index knew: no exact tests
+    }
+    EXPECT_TRUE(sameStore(before, storeOf(registry)));
+}
+
+// ---- moving and changing lights
+// ------------------------------------------------------------------
+
+TEST(PhotonUpdate, AMovedLightIsReshotWithinTheBudgetUntilItMatchesAFullShot) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonSettings settings = settingsWith(10'000);
+    settings.reshootBudget = 3'000;
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+
+    const glm::vec3 moved(0.5f, 0.9f, -0.3f);
+    registry.patch<WorldTransform>(room.light).matrix = translation(moved);
+    registry.patch<PointLight>(room.light).intensity = 12.f;
+    std::vector<std::size_t> perFrame;
+    std::vector<bool> seen(10'000, false);
+    for (std::uint64_t frame = 1; frame <= 5; ++frame) {
+        const PhotonStore before = storeOf(registry);
+        system.update(registry, FrameContext{frame, 0.0, 0.f, 0});
+        registry.clearChanges();
+        const PhotonDelta& delta = deltaOf(registry);
+        const PhotonStore& after = storeOf(registry);
+        ASSERT_FALSE(delta.full);
+        perFrame.push_back(delta.paths.size());
+        for (std::size_t i = 0; i < delta.paths.size(); ++i) {
+            const std::uint32_t p = delta.paths[i];
+            EXPECT_FALSE(seen[p]) << "photon " << p << " re-shot twice";
+            seen[p] = true;
+            // Whole paths: the old one as stored, the new one from the moved light.
+            ASSERT_EQ(delta.oldFirst[i + 1] - delta.oldFirst[i], before.paths[p].count);
+            ASSERT_EQ(delta.newFirst[i + 1] - delta.newFirst[i], after.paths[p].count);
+            EXPECT_EQ(delta.newSegments.origin[delta.newFirst[i]], moved);
+            EXPECT_EQ(delta.newSegments.bounce[delta.newFirst[i]], 0);
+        }
+    }
+    EXPECT_EQ(perFrame, (std::vector<std::size_t>{3'000, 3'000, 3'000, 1'000, 0}));
+    const PhotonStore& store = storeOf(registry);
+    const glm::vec3 power = 4.f * glm::pi<float>() * 12.f * glm::vec3(1.f);
+    EXPECT_EQ(store.lights[0].power, power);
+    EXPECT_EQ(store.emittedPower, power);
+
+    Registry fresh;
+    const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
+    fresh.patch<WorldTransform>(again.light).matrix = translation(moved);
+    fresh.patch<PointLight>(again.light).intensity = 12.f;
+    buildRayScene(fresh);
+    PhotonUpdateSystem full(settings);
+    firstUpdate(fresh, full);
+    EXPECT_TRUE(sameStore(store, storeOf(fresh)));
+}
+
+TEST(PhotonUpdate, AddingALightShootsEverythingAnew) {
+    Registry registry;
+    buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(4'000));
+    firstUpdate(registry, system);
+    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+    EXPECT_TRUE(deltaOf(registry).empty());
+    test::addPointLight(registry, {-1.f, 0.f, 1.f}, 30.f);
+    system.update(registry, FrameContext{2, 0.0, 0.f, 0});
+    EXPECT_TRUE(deltaOf(registry).full);
+    ASSERT_EQ(storeOf(registry).lights.size(), 2u);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 3'000u); // 30 W/sr of 40 W/sr
+}
+
+// ---- energy
+// --------------------------------------------------------------------------------------
+
+/// Closed box of uniform albedo rho around a point light: every photon eventually lands, and
+/// the stored incident power per emitted watt is sum_{k <= K} rho^k (1 / (1 - rho) but for the
+/// bounce cap K). Each photon's total is independent of the others (its roulette draws are
+/// its own), so the mean over N photons lies within a few standard errors of that.
+void expectClosedBoxEnergy(const glm::vec3& rho) {
+    Registry registry;
+    Material material;
+    material.baseColor = rho;
+    test::addMesh(registry, test::boxMesh(glm::vec3(1.f), true), glm::mat4(1.f), material, false,
+                  "closed box");
+    test::addPointLight(registry, {0.1f, 0.2f, -0.3f}, 2.f);
+    buildRayScene(registry);
+    PhotonSettings settings = settingsWith(40'000);
+    settings.maxBounces = 12;
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore& store = storeOf(registry);
+    const glm::vec3 emitted = store.emittedPower;
+    EXPECT_NEAR(emitted.x, 8.f * glm::pi<float>(), 1e-4f);
+
+    const double n = double(store.pathCount());
+    glm::dvec3 sum(0.0), sumSquares(0.0);
+    std::size_t escaped = 0;
+    for (const PhotonPath& path : store.paths) {
+        glm::dvec3 landed(0.0);
+        for (std::size_t s = path.first; s < path.first + path.count; ++s) {
+            if (!store.segments.hitEntity[s]) ++escaped;
+            landed += glm::dvec3(store.segments.power[s]) * n / glm::dvec3(emitted);
+        }
+        sum += landed;
+        sumSquares += landed * landed;
+    }
+    EXPECT_EQ(escaped, 0u);
+    for (int c = 0; c < 3; ++c) {
+        const double mean = sum[c] / n;
+        const double sd = std::sqrt(std::max(0.0, sumSquares[c] / n - mean * mean));
+        double expected = 0.0;
+        for (std::uint32_t k = 0; k <= settings.maxBounces; ++k)
+            expected += std::pow(double(rho[c]), double(k));
+        // 4.5 standard errors: a false alarm once in 150,000 runs.
+        EXPECT_NEAR(mean, expected, 4.5 * sd / std::sqrt(n)) << "channel " << c;
+        EXPECT_GT(sd, 0.0);
+    }
+}
+
+TEST(PhotonUpdate, ClosedGreyBoxStoresOneOverOneMinusRhoTimesTheEmittedPower) {
+    expectClosedBoxEnergy(glm::vec3(0.5f));
+}
+
+TEST(PhotonUpdate, ClosedColouredBoxKeepsEachChannelUnbiased) {
+    expectClosedBoxEnergy({0.3f, 0.5f, 0.7f});
+}
+
+// ---- settings
+// ------------------------------------------------------------------------------------
+
+TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
+    const auto rejects = [](auto edit, const char* field) {
+        PhotonSettings s;
+        edit(s);
+        try {
+            PhotonUpdateSystem system(s);
+            ADD_FAILURE() << field << " accepted";
+        } catch (const Error& e) {
+            EXPECT_THAT(e.what(), HasSubstr(field));
+        }
+    };
+    rejects([](PhotonSettings& s) { s.photonCount = 0; }, "photonCount");
+    rejects([](PhotonSettings& s) { s.photonCount = 100'000'000; }, "photonCount");
+    rejects([](PhotonSettings& s) { s.maxBounces = 256; }, "maxBounces");
+    rejects([](PhotonSettings& s) { s.reshootBudget = 0; }, "reshootBudget");
+    rejects([](PhotonSettings& s) { s.gridResolution = 0; }, "gridResolution");
+    rejects([](PhotonSettings& s) { s.gridResolution = 4096; }, "gridResolution");
+    rejects([](PhotonSettings& s) { s.compactionFraction = 0.f; }, "compactionFraction");
+    rejects([](PhotonSettings& s) { s.compactionFraction = NAN; }, "compactionFraction");
+    rejects([](PhotonSettings& s) { s.gridRefreshBudget = 0; }, "gridRefreshBudget");
+    rejects(
+        [](PhotonSettings& s) {
+            s.punctualLights = false;
+            s.emissiveSurfaces = false;
+        },
+        "punctualLights");
+    EXPECT_NO_THROW(PhotonUpdateSystem{PhotonSettings{}});
+}
+
+} // namespace
+} // namespace qgi
