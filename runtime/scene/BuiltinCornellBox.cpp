@@ -4,6 +4,7 @@
 #include "components/Camera.h"
 #include "components/MobileMesh.h"
 #include "components/PathFollower.h"
+#include "components/LightStandIn.h"
 #include "components/PointLight.h"
 #include "components/StaticMesh.h"
 #include "runtime/scene/BuiltinPaths.h"
@@ -68,8 +69,8 @@ constexpr float kLightPower = 15.f;           // W
 constexpr float kLightArea = 0.130f * 0.105f; // m^2
 constexpr float kLightDrop = 0.5f;            // mm below the ceiling
 constexpr float kCeiling = 548.8f;            // mm
-// The punctual stand-in for hybrid mode, 2 cm below the luminaire, with the same total power
-// (4 pi I = kLightPower).
+// The punctual stand-in for hybrid mode's direct light, 2 cm below the luminaire, with the
+// same total power (4 pi I = kLightPower). Tagged LightStandIn: it shoots no photons.
 constexpr float kPointLightDrop = 20.f; // mm below the luminaire
 
 // Standard camera: 35 mm focal length on a 25 mm film.
@@ -130,6 +131,7 @@ void buildCornellBox(BuiltinSceneBuilder& builder) {
         "light (point)", Transform{fromData(278, lightY - kPointLightDrop, 279.5f)});
     registry.emplace<PointLight>(
         lamp, PointLight{glm::vec3(1.f), kLightPower / (4.f * glm::pi<float>())});
+    registry.emplace<LightStandIn>(lamp); // the luminaire's photons carry its light
 
     // The short block, mobile: its origin is the centre of its footprint, and it slides 5 cm
     // towards the green wall and back at 2 cm/s.

@@ -23,6 +23,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/LightStandIn.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/Transform.h"
@@ -191,6 +192,13 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
         if (lights.size() > 1)
             logWarning(label, ": node '", node.name, "' has ", lights.size(),
                        " lights; glTF allows one per node, only the first is written");
+        if (!lights.empty() && registry.has<LightStandIn>(e)) {
+            tinygltf::Value::Object extras =
+                node.extras.IsObject() ? node.extras.Get<tinygltf::Value::Object>()
+                                       : tinygltf::Value::Object{};
+            extras["standIn"] = tinygltf::Value(true);
+            node.extras = tinygltf::Value(std::move(extras));
+        }
         if (!lights.empty()) {
             node.extensions[kLightsExtension] = tinygltf::Value(
                 tinygltf::Value::Object{{"light", tinygltf::Value(int(model.lights.size()))}});

@@ -4,6 +4,7 @@
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
@@ -117,6 +118,7 @@ struct EntityRecord {
     glm::mat4 world{1.f};
     std::optional<Camera> camera;
     Light light;
+    bool lightStandIn = false; ///< node extras {"standIn": true}: see LightStandIn
     Mobility mobility = Mobility::Static;
     const RawPrimitive* source = nullptr; ///< the primitive this entity draws, if any
     bool primitiveOnly = false; ///< exists only to hold one primitive of a multi-primitive mesh
@@ -363,6 +365,7 @@ private:
     std::vector<int> sceneRoots(const std::vector<int>& parents) const;
     Transform localTransform(int index) const;
     std::optional<Mobility> nodeMobility(int index) const;
+    bool nodeStandIn(int index) const;
     int nodeLight(int index) const;
     /// One record per node below `roots` (and per primitive of multi-primitive meshes).
     std::vector<EntityRecord> traverse(const std::vector<int>& roots);
@@ -956,6 +959,16 @@ Transform GltfReader::localTransform(int index) const {
     return t;
 }
 
+bool GltfReader::nodeStandIn(int index) const {
+    const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
+    if (!extras.IsObject() || !extras.Has("standIn")) return false;
+    const tinygltf::Value& standIn = extras.Get("standIn");
+    if (!standIn.IsBool()) fail(str("nodes[", index, "].extras.standIn"), "must be true or false");
+    if (nodeLight(index) < 0)
+        fail(str("nodes[", index, "].extras.standIn"), "set on a node without a light");
+    return standIn.Get<bool>();
+}
+
 std::optional<Mobility> GltfReader::nodeMobility(int index) const {
     const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
     if (!extras.IsObject()) return std::nullopt;
@@ -1026,6 +1039,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                 }
             }
             if (const int light = nodeLight(index); light >= 0) record.light = readLight(light);
+            record.lightStandIn = nodeStandIn(index);
             records.push_back(std::move(record));
         }
         if (node.mesh != -1) {
@@ -1164,6 +1178,7 @@ void populate(Registry& registry, ImportedScene& scene) {
                     if constexpr (!std::is_same_v<T, std::monostate>) registry.emplace<T>(e, light);
                 },
                 r.light);
+            if (r.lightStandIn) registry.emplace<LightStandIn>(e);
             if (!r.mesh) continue;
             registry.emplace<Mesh>(e, std::move(*r.mesh));
             registry.emplace<Material>(e, r.material);

@@ -4,6 +4,7 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/LightStandIn.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -129,10 +130,12 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
     if (settings.punctualLights) {
         registry.view<const PointLight, const WorldTransform>().each(
             [&](Entity e, const PointLight& light, const WorldTransform& world) {
+                if (registry.has<LightStandIn>(e)) return; // its surface shoots the photons
                 add(EmitterKind::Point, e, world.matrix).radiant = light.color * light.intensity;
             });
         registry.view<const SpotLight, const WorldTransform>().each(
             [&](Entity e, const SpotLight& light, const WorldTransform& world) {
+                if (registry.has<LightStandIn>(e)) return;
                 PhotonEmitter& emitter = add(EmitterKind::Spot, e, world.matrix);
                 emitter.radiant = light.color * light.intensity;
                 emitter.innerAngle = light.innerConeAngle;
@@ -140,6 +143,7 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
             });
         registry.view<const DirectionalLight, const WorldTransform>().each(
             [&](Entity e, const DirectionalLight& light, const WorldTransform& world) {
+                if (registry.has<LightStandIn>(e)) return;
                 add(EmitterKind::Directional, e, world.matrix).radiant =
                     light.color * light.irradiance;
             });

@@ -5,6 +5,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/LightStandIn.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -227,6 +228,7 @@ void IrradianceReference::addSurfaces(const Registry& registry) {
 
 void IrradianceReference::addLights(const Registry& registry) {
     registry.view<const PointLight>().each([&](Entity e, const PointLight& light) {
+        if (registry.has<LightStandIn>(e)) return; // adds no light of its own
         const std::string who = describe(registry, e, "PointLight");
         checkColor(light.color, kInfinity, who, "PointLight.color");
         checkScalar(light.intensity, kInfinity, who, "PointLight.intensity");
@@ -236,6 +238,7 @@ void IrradianceReference::addLights(const Registry& registry) {
         out.radiance = light.color * light.intensity;
     });
     registry.view<const SpotLight>().each([&](Entity e, const SpotLight& light) {
+        if (registry.has<LightStandIn>(e)) return; // adds no light of its own
         const std::string who = describe(registry, e, "SpotLight");
         checkColor(light.color, kInfinity, who, "SpotLight.color");
         checkScalar(light.intensity, kInfinity, who, "SpotLight.intensity");
@@ -258,6 +261,7 @@ void IrradianceReference::addLights(const Registry& registry) {
         out.coneOffset = -cosOuter * scale;
     });
     registry.view<const DirectionalLight>().each([&](Entity e, const DirectionalLight& light) {
+        if (registry.has<LightStandIn>(e)) return; // adds no light of its own
         const std::string who = describe(registry, e, "DirectionalLight");
         checkColor(light.color, kInfinity, who, "DirectionalLight.color");
         checkScalar(light.irradiance, kInfinity, who, "DirectionalLight.irradiance");

@@ -13,6 +13,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/LightStandIn.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -90,7 +91,9 @@ void buildScene(Registry& r) {
 
     Transform lightPose;
     lightPose.translation = {0, 2.5f, 0};
-    r.emplace<PointLight>(addNode(r, "Bulb", lightPose), PointLight{{1, 0.9f, 0.8f}, 12.f});
+    const Entity bulb = addNode(r, "Bulb", lightPose);
+    r.emplace<PointLight>(bulb, PointLight{{1, 0.9f, 0.8f}, 12.f});
+    r.emplace<LightStandIn>(bulb);
     lightPose.rotation = glm::angleAxis(-1.5f, glm::vec3(1, 0, 0));
     r.emplace<SpotLight>(addNode(r, "Spot", lightPose), SpotLight{{0.5f, 1, 1}, 30.f, 0.1f, 0.5f});
     r.emplace<DirectionalLight>(addNode(r, "Sun", lightPose), DirectionalLight{{1, 1, 0.9f}, 4.f});
@@ -196,6 +199,7 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
 
     // Lights and cameras.
     const PointLight& bulb = imported.get<PointLight>(entityNamed(imported, "Bulb"));
+    EXPECT_TRUE(imported.has<LightStandIn>(entityNamed(imported, "Bulb")));
     expectNear(bulb.color, {1, 0.9f, 0.8f}, kTolerance);
     EXPECT_EQ(bulb.intensity, 12.f);
     const SpotLight& spot = imported.get<SpotLight>(entityNamed(imported, "Spot"));

@@ -3,6 +3,7 @@
 #include "systems/photon_update/PhotonEmitter.h"
 
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/SpotLight.h"
 #include "runtime/core/Log.h"
 #include "test_photon_scenes.h"
@@ -333,6 +334,26 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
 }
 
 // ---- the system's share of photons among lights ---------------------------------------------
+
+TEST(PhotonEmission, StandInLightsShootNoPhotons) {
+    // A bulb standing in for a lamp's diffuser (LightStandIn) is drawn by the shader only; the
+    // diffuser's photons carry the light, so counting the bulb too would double the lamp.
+    Registry registry;
+    test::addMesh(registry, test::boxMesh({3.f, 2.f, 3.f}, true, true), glm::mat4(1.f),
+                  test::grey(0.6f), false, "open room");
+    const Entity bulb = test::addPointLight(registry, {0.f, 1.f, 0.f}, 5.f);
+    registry.emplace<LightStandIn>(bulb);
+    test::addPointLight(registry, {0.5f, 1.f, 0.f}, 3.f);
+    test::buildRayScene(registry);
+    PhotonSettings settings;
+    settings.photonCount = 1000;
+    PhotonUpdateSystem system(settings);
+    test::firstUpdate(registry, system);
+    const PhotonStore& store = registry.ctx().get<PhotonStore>();
+    ASSERT_EQ(store.lights.size(), 1u);
+    EXPECT_NE(store.lights[0].entity, bulb);
+    EXPECT_NEAR(store.emittedPower.x, 4.0 * kPi * 3.0, 1e-4);
+}
 
 TEST(PhotonEmission, PhotonCountsFollowPowerAndEveryPhotonCarriesItsShare) {
     Registry registry;

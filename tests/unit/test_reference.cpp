@@ -4,6 +4,7 @@
 
 #include "tests/reference/IrradianceReference.h"
 
+#include "components/LightStandIn.h"
 #include "components/DirectionalLight.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
@@ -174,6 +175,17 @@ TEST(Reference, PointLightOverBlackPlaneFallsOffAsCosOverDistanceSquared) {
     }
     // The same point facing down sees nothing of a light above it.
     expectExact(scene.estimate(glm::vec3(0.f), -kUp, samples(64)), glm::dvec3(0.0));
+}
+
+TEST(Reference, StandInLightsAddNoLight) {
+    // LightStandIn marks a bulb that duplicates an emissive surface for the shader's direct
+    // light; physically the surface is the light, so the reference ignores the bulb.
+    TestScene scene;
+    addBlackFloor(scene);
+    const Entity bulb = scene.addLight(PointLight{glm::vec3(1.f), 3.f},
+                                       glm::translate(glm::mat4(1.f), glm::vec3(0.f, 1.f, 0.f)));
+    scene.registry.emplace<LightStandIn>(bulb);
+    expectExact(scene.estimate(glm::vec3(0.f), kUp, samples(64)), glm::dvec3(0.0));
 }
 
 TEST(Reference, DirectionalLightGivesIrradianceTimesCosine) {
