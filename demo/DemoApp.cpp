@@ -82,7 +82,8 @@ int runDemo(const DemoOptions& options) {
     render.width = window.width();
     render.height = window.height();
     render.mode = options.mode == "photon" ? ShadingMode::Photon : ShadingMode::Hybrid;
-    render.exposure = options.exposure;
+    render.exposure =
+        options.exposure > 0.f ? options.exposure : world.ctx().get<SceneInfo>().exposure;
     FrameSchedule frame(world, frameSettings);
     FlyController controller(window.handle());
     if (!options.headless)

@@ -54,8 +54,9 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_flag("--full-recompute", o.fullRecompute,
                  "Re-shoot every photon and re-estimate every vertex each frame (the baseline "
                  "the incremental update is measured against)");
-    app.add_option("--exposure", o.exposure, "Multiplier on HDR radiance before the tonemap")
-        ->check(CLI::Range(1e-6f, 1e6f));
+    app.add_option("--exposure", o.exposure,
+                   "Multiplier on HDR radiance before the tonemap (0: the scene's suggestion)")
+        ->check(CLI::Range(0.f, 1e6f));
     app.add_option("--max-edge", o.maxEdgeLength,
                    "Mesh refinement bound in metres (0: the scene's default)")
         ->check(CLI::Range(0.f, 1000.f));

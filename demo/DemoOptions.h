@@ -19,7 +19,7 @@ struct DemoOptions {
     std::string estimator = "detp";   ///< "detp", "impact" or "photonmap"
     float discRadius = 0.f;           ///< DETP disc radius in metres; 0: the scene's default
     bool fullRecompute = false;       ///< re-shoot and re-estimate everything every frame
-    float exposure = 1.f;             ///< multiplier on HDR radiance before tonemapping
+    float exposure = 0.f;             ///< multiplier on HDR radiance; 0: the scene's suggestion
     float maxEdgeLength = 0.f;        ///< mesh refinement bound in metres; 0: scene default
     double dt = 1.0 / 30.0;           ///< seconds per frame in headless runs
     std::uint64_t seed = 1;

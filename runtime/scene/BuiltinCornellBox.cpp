@@ -5,6 +5,7 @@
 #include "components/MobileMesh.h"
 #include "components/PathFollower.h"
 #include "components/LightStandIn.h"
+#include "runtime/scene/SceneInfo.h"
 #include "components/PointLight.h"
 #include "components/StaticMesh.h"
 #include "runtime/scene/BuiltinPaths.h"
@@ -175,6 +176,8 @@ void buildCornellBox(BuiltinSceneBuilder& builder) {
     registry.emplace<PathFollower>(camera, std::move(sway));
 
     builder.finish(glm::vec3(0.f)); // nothing outside: the open front looks into the dark
+    // 15 W in a box half a metre wide: walls reach a few hundred W/m^2.
+    registry.ctx().get<SceneInfo>().exposure = 0.3f;
 }
 
 } // namespace qgi

@@ -34,6 +34,7 @@ struct SceneInfo {
     Aabb bounds;                ///< world bounds of every mesh at load time (mobiles at rest)
     glm::vec3 environment{0.f}; ///< radiance of the sky seen by rays that leave, W/(m^2 sr)
     float maxEdgeLength = 0.f;  ///< metres: the refinement bound the meshes were processed with
+    float exposure = 1.f;       ///< suggested multiplier on radiance for viewing (demo default)
 };
 
 } // namespace qgi
