@@ -274,3 +274,34 @@ TEST(DetpDiscIndex, RejectsBadInput) {
 
 } // namespace
 } // namespace qgi
+
+namespace qgi {
+namespace {
+
+// A vertex on a shallow fold (two planes meeting at 0.5 degrees, like the published Cornell
+// walls) has its disc tilted by half the fold, so half the disc lies just behind the surface.
+// Vertical rays landing on the surface inside the disc's footprint must all count; with too
+// small an end tolerance, the ones on the far half stopped short of the disc plane and the
+// fold showed as a dark line.
+TEST(DiscCrossingRule, LandingsOnAShallowFoldAllCount) {
+    const float fold = 0.5f * 3.14159265f / 180.f; // radians
+    const float r = 0.01f;
+    const glm::vec3 normal = glm::normalize(glm::vec3(-std::sin(0.5f * fold), std::cos(0.5f * fold), 0.f));
+    const glm::vec3 down(0.f, -1.f, 0.f);
+    int inside = 0, counted = 0;
+    const int n = 200;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            const float x = r * (2.f * (float(i) + 0.5f) / float(n) - 1.f);
+            const float z = r * (2.f * (float(j) + 0.5f) / float(n) - 1.f);
+            if (x * x + z * z > 0.95f * r * r) continue; // keep clear of the rim
+            ++inside;
+            const float surface = x > 0.f ? x * std::tan(fold) : 0.f;
+            const glm::vec3 origin(x, 1.f, z);
+            if (crossesDisc(origin, down, 1.f - surface, glm::vec3(0.f), normal, r)) ++counted;
+        }
+    EXPECT_EQ(counted, inside);
+}
+
+} // namespace
+} // namespace qgi
