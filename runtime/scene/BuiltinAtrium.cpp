@@ -1,5 +1,7 @@
 #include "runtime/scene/BuiltinAtrium.h"
 
+#include "runtime/scene/SceneInfo.h"
+
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
@@ -570,6 +572,9 @@ void buildAtrium(BuiltinSceneBuilder& builder) {
     // Blue sky radiance, W/(m^2 sr): about an eighth of the sunlit court floor's
     // (0.62 / pi * 60 W/m^2 * sin 62 degrees = 10.4).
     builder.finish(glm::vec3(1.0f, 1.3f, 1.8f));
+    // The sunlit floor (about 10 W/(m^2 sr)) would saturate the tonemap at exposure 1; a
+    // quarter keeps the court readable while the arcades stay visible.
+    builder.registry().ctx().get<SceneInfo>().exposure = 0.25f;
 }
 
 } // namespace qgi
