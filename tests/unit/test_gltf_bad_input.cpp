@@ -110,8 +110,11 @@ TEST(GltfBadInput, EveryCorpusFileHasACase) {
     EXPECT_EQ(files, cases);
 }
 
+// One folder per test: ctest runs tests in parallel processes, and two tests writing the same
+// scratch file (triangle.bin) would read each other's half-written copies.
 fs::path scratchFile(const std::string& name) {
-    const fs::path dir = fs::path(::testing::TempDir()) / "qgi_gltf_bad_input";
+    const fs::path dir = fs::path(::testing::TempDir()) / "qgi_gltf_bad_input" /
+                         ::testing::UnitTest::GetInstance()->current_test_info()->name();
     fs::create_directories(dir);
     return dir / name;
 }
