@@ -34,4 +34,15 @@ GoldenCheck checkGolden(const std::filesystem::path& golden, const ImageF& fresh
     return GoldenCheck::Compared;
 }
 
+void writeFailureImages(const std::filesystem::path& dir, const std::string& name,
+                        const ImageF& actual, const ImageF& expected) {
+    ImageF diff = actual;
+    for (std::size_t i = 0; i < diff.rgba.size(); ++i)
+        diff.rgba[i] = (i % 4 == 3) ? 1.f : std::abs(actual.rgba[i] - expected.rgba[i]);
+    writeExr(dir / (name + "_actual.exr"), actual);
+    writeExr(dir / (name + "_reference.exr"), expected);
+    writeExr(dir / (name + "_diff.exr"), diff);
+    ADD_FAILURE() << "wrote " << name << "_{actual,reference,diff}.exr to " << dir;
+}
+
 } // namespace qgi::test

@@ -5,6 +5,7 @@
 #include "runtime/io/ImageF.h"
 
 #include <filesystem>
+#include <string>
 
 namespace qgi::test {
 
@@ -18,5 +19,10 @@ enum class GoldenCheck { Compared, Written };
 /// smooth values by ~1e-7 and can only flip pixels whose rays graze an edge within ~1e-12 m,
 /// so 0.1 % of the values may differ and the rest must agree to 1e-5 relative.
 GoldenCheck checkGolden(const std::filesystem::path& golden, const ImageF& fresh);
+
+/// For a failed comparison: writes <name>_actual.exr, <name>_reference.exr and
+/// <name>_diff.exr (|actual - expected|) into `dir` and records a test failure naming them.
+void writeFailureImages(const std::filesystem::path& dir, const std::string& name,
+                        const ImageF& actual, const ImageF& expected);
 
 } // namespace qgi::test

@@ -225,18 +225,6 @@ ImageComparison compareImages(const ImageF& actual, const RefImage& reference, d
     return c;
 }
 
-/// Writes actual, reference and |difference| next to the test binary for a failed comparison.
-void writeFailureImages(const std::string& name, const ImageF& actual, const ImageF& expected) {
-    ImageF diff = actual;
-    for (std::size_t i = 0; i < diff.rgba.size(); ++i)
-        diff.rgba[i] = (i % 4 == 3) ? 1.f : std::abs(actual.rgba[i] - expected.rgba[i]);
-    const fs::path dir(QGI_TEST_OUTPUT_DIR);
-    writeExr(dir / (name + "_actual.exr"), actual);
-    writeExr(dir / (name + "_reference.exr"), expected);
-    writeExr(dir / (name + "_diff.exr"), diff);
-    ADD_FAILURE() << "wrote " << name << "_{actual,reference,diff}.exr to " << dir;
-}
-
 // Non-discontinuity pixels: the GPU and the reference evaluate the same formula at the same
 // pixel centre; float32 interpolation of world positions (~1e-6 m at ~2 m) moves 1/d^2 and
 // cos by ~1e-5 relative, so 1e-3 leaves a factor 100 of headroom.
@@ -264,7 +252,9 @@ void expectMatchesReference(const std::string& name, const ImageF& actual,
     // plus the smooth pixels' tolerance.
     ok &= c.meanError <= c.discontinuityFraction + kPixelTolerance;
     EXPECT_LE(c.meanError, c.discontinuityFraction + kPixelTolerance) << name;
-    if (!ok) writeFailureImages(name, actual, reference.radiance);
+    if (!ok)
+        test::writeFailureImages(fs::path(QGI_TEST_OUTPUT_DIR), name, actual,
+                                 reference.radiance);
 }
 
 // ---- fixture -------------------------------------------------------------------------------

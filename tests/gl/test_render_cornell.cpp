@@ -184,18 +184,6 @@ Comparison compare(const ImageF& actual, const RefImage& reference) {
     return c;
 }
 
-/// Writes actual, reference and |difference| next to the test binary.
-void writeFailureImages(const std::string& name, const ImageF& actual, const ImageF& expected) {
-    ImageF diff = actual;
-    for (std::size_t i = 0; i < diff.rgba.size(); ++i)
-        diff.rgba[i] = (i % 4 == 3) ? 1.f : std::abs(actual.rgba[i] - expected.rgba[i]);
-    const fs::path dir(QGI_TEST_OUTPUT_DIR);
-    writeExr(dir / (name + "_actual.exr"), actual);
-    writeExr(dir / (name + "_reference.exr"), expected);
-    writeExr(dir / (name + "_diff.exr"), diff);
-    ADD_FAILURE() << "wrote " << name << "_{actual,reference,diff}.exr to " << dir;
-}
-
 // ---- the test --------------------------------------------------------------------------------
 
 class BuiltinCornellTest : public ::testing::Test {
@@ -267,7 +255,9 @@ TEST_F(BuiltinCornellTest, DirectLightMatchesCpuReference) {
     ok &= luminaireFraction >= 0.9;
     EXPECT_GE(luminaireFraction, 0.9) << "of " << luminaire << " luminaire pixels";
 
-    if (!ok) writeFailureImages("builtin_cornell", actual, reference.radiance);
+    if (!ok)
+        test::writeFailureImages(fs::path(QGI_TEST_OUTPUT_DIR), "builtin_cornell", actual,
+                                 reference.radiance);
 }
 
 // The committed reference EXR must be exactly what the CPU reference computes today from the

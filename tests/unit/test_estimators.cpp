@@ -15,6 +15,8 @@
 #include "runtime/raytrace/RayScene.h"
 #include "systems/photon_update/PhotonStore.h"
 
+#include "test_grid_mesh.h"
+
 #include <gtest/gtest.h>
 
 #include <glm/gtc/constants.hpp>
@@ -173,22 +175,7 @@ TEST(PhotonKdTree, NearestEqualsBruteForce) {
 
 // ---- scenes for the estimators -------------------------------------------------------------
 
-Mesh gridMesh(glm::vec3 origin, glm::vec3 u, glm::vec3 v, int n) {
-    Mesh mesh;
-    const glm::vec3 normal = glm::normalize(glm::cross(u, v));
-    for (int i = 0; i <= n; ++i)
-        for (int j = 0; j <= n; ++j) {
-            mesh.positions.push_back(origin + (float(i) / float(n)) * u +
-                                     (float(j) / float(n)) * v);
-            mesh.normals.push_back(normal);
-        }
-    const auto at = [n](int i, int j) { return std::uint32_t(i * (n + 1) + j); };
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j)
-            mesh.indices.insert(mesh.indices.end(), {at(i, j), at(i + 1, j), at(i + 1, j + 1),
-                                                     at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    return mesh;
-}
+using test::gridMesh;
 
 Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world, bool mobile) {
     const Entity e = registry.create();
