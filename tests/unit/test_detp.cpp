@@ -15,7 +15,7 @@
 #include "systems/photon_update/PhotonStore.h"
 
 #include <gmock/gmock.h>
-#include "test_grid_mesh.h"
+#include "test_meshes.h"
 
 #include <gtest/gtest.h>
 

@@ -15,7 +15,7 @@
 #include "runtime/raytrace/RayScene.h"
 #include "systems/photon_update/PhotonStore.h"
 
-#include "test_grid_mesh.h"
+#include "test_meshes.h"
 
 #include <gtest/gtest.h>
 

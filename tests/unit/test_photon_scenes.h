@@ -3,6 +3,7 @@
 
 #include "components/Material.h"
 #include "components/Mesh.h"
+#include "test_meshes.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/PointLight.h"
@@ -24,37 +25,6 @@ namespace qgi::test {
 
 inline glm::mat4 translation(const glm::vec3& t) {
     return glm::translate(glm::mat4(1.f), t);
-}
-
-/// Axis-aligned box centred on the origin: 12 triangles facing outwards, or inwards (a room).
-/// `openTop` leaves out the +y face.
-inline Mesh boxMesh(const glm::vec3& half, bool inward = false, bool openTop = false) {
-    Mesh mesh;
-    for (int i = 0; i < 8; ++i)
-        mesh.positions.push_back(
-            {i & 1 ? half.x : -half.x, i & 2 ? half.y : -half.y, i & 4 ? half.z : -half.z});
-    for (int axis = 0; axis < 3; ++axis) {
-        for (int side = 0; side < 2; ++side) {
-            if (openTop && axis == 1 && side == 1) continue;
-            const int bitA = 1 << ((axis + 1) % 3), bitB = 1 << ((axis + 2) % 3);
-            const int base = side ? 1 << axis : 0;
-            const std::uint32_t c[4] = {std::uint32_t(base), std::uint32_t(base | bitA),
-                                        std::uint32_t(base | bitA | bitB),
-                                        std::uint32_t(base | bitB)};
-            glm::vec3 outward(0.f);
-            outward[axis] = side ? 1.f : -1.f;
-            const glm::vec3 n = glm::cross(mesh.positions[c[1]] - mesh.positions[c[0]],
-                                           mesh.positions[c[2]] - mesh.positions[c[0]]);
-            const bool flip = (glm::dot(n, outward) < 0.f) != inward;
-            if (flip)
-                mesh.indices.insert(mesh.indices.end(), {c[0], c[2], c[1], c[0], c[3], c[2]});
-            else
-                mesh.indices.insert(mesh.indices.end(), {c[0], c[1], c[2], c[0], c[2], c[3]});
-        }
-    }
-    for (std::size_t i = 0; i < mesh.positions.size(); ++i)
-        mesh.normals.push_back(glm::normalize(mesh.positions[i]));
-    return mesh;
 }
 
 inline Material grey(float albedo) {

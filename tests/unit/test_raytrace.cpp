@@ -11,6 +11,8 @@
 #include "runtime/raytrace/EmbreeDevice.h"
 
 #include <gmock/gmock.h>
+#include "test_meshes.h"
+
 #include <gtest/gtest.h>
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -44,33 +46,6 @@ Mesh quad(float x0, float y0, float x1, float y1) {
     return mesh;
 }
 
-/// Axis-aligned box centred on the origin, 12 triangles facing outwards (inwards if asked).
-Mesh box(glm::vec3 half, bool inward = false) {
-    Mesh mesh;
-    for (int i = 0; i < 8; ++i)
-        mesh.positions.push_back(
-            {i & 1 ? half.x : -half.x, i & 2 ? half.y : -half.y, i & 4 ? half.z : -half.z});
-    for (int axis = 0; axis < 3; ++axis) {
-        for (int side = 0; side < 2; ++side) {
-            // The four corners with coordinate `axis` on `side`, in cyclic order around the face.
-            const int bitA = 1 << ((axis + 1) % 3), bitB = 1 << ((axis + 2) % 3);
-            const int base = side ? 1 << axis : 0;
-            const std::uint32_t c[4] = {std::uint32_t(base), std::uint32_t(base | bitA),
-                                        std::uint32_t(base | bitA | bitB),
-                                        std::uint32_t(base | bitB)};
-            glm::vec3 outward(0.f);
-            outward[axis] = side ? 1.f : -1.f;
-            const glm::vec3 n = glm::cross(mesh.positions[c[1]] - mesh.positions[c[0]],
-                                           mesh.positions[c[2]] - mesh.positions[c[0]]);
-            const bool flip = (glm::dot(n, outward) < 0.f) != inward;
-            if (flip)
-                mesh.indices.insert(mesh.indices.end(), {c[0], c[2], c[1], c[0], c[3], c[2]});
-            else
-                mesh.indices.insert(mesh.indices.end(), {c[0], c[1], c[2], c[0], c[2], c[3]});
-        }
-    }
-    return mesh;
-}
 
 enum class Mobility { Static, Mobile };
 
@@ -153,15 +128,15 @@ struct Clutter {
     Entity room, table, pillar, crate, door;
 
     Clutter() {
-        room = addMesh(registry, box({5.f, 5.f, 5.f}, true), kIdentity, Mobility::Static, "room");
-        table = addMesh(registry, box({1.5f, 0.1f, 1.f}), translation(1.f, -1.f, 0.5f),
+        room = addMesh(registry, test::boxMesh({5.f, 5.f, 5.f}, true), kIdentity, Mobility::Static, "room");
+        table = addMesh(registry, test::boxMesh({1.5f, 0.1f, 1.f}), translation(1.f, -1.f, 0.5f),
                         Mobility::Static, "table");
-        pillar = addMesh(registry, box({0.3f, 5.f, 0.3f}), translation(-3.f, 0.f, 2.f),
+        pillar = addMesh(registry, test::boxMesh({0.3f, 5.f, 0.3f}), translation(-3.f, 0.f, 2.f),
                          Mobility::Static, "pillar");
-        crate = addMesh(registry, box({0.5f, 0.5f, 0.5f}),
+        crate = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}),
                         glm::rotate(translation(-1.f, -4.f, -2.f), 0.6f, glm::vec3(0, 1, 0)),
                         Mobility::Mobile, "crate");
-        door = addMesh(registry, box({1.f, 2.f, 0.05f}),
+        door = addMesh(registry, test::boxMesh({1.f, 2.f, 0.05f}),
                        glm::scale(glm::rotate(translation(3.f, -2.f, -3.f), 1.1f,
                                               glm::normalize(glm::vec3(0.2f, 1.f, 0.1f))),
                                   glm::vec3(1.f, 1.2f, 0.8f)),
@@ -282,7 +257,7 @@ TEST(RayScene, OcclusionRespectsTheSegment) {
 TEST(RayScene, RaysThatMissReturnNothing) {
     Registry registry;
     addMesh(registry, quad(-1, -1, 1, 1), kIdentity, Mobility::Static);
-    addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(0, 3, 0), Mobility::Mobile);
+    addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 3, 0), Mobility::Mobile);
     RayScene scene;
     scene.build(registry);
     const Ray away = ray({0, 0, 1}, {0, 0, 1});
@@ -296,7 +271,7 @@ TEST(RayScene, RaysThatMissReturnNothing) {
 TEST(RayScene, AvatarsAndUntaggedMeshesAreNotInTheScene) {
     Registry registry;
     const Entity avatar = registry.create();
-    registry.emplace<Mesh>(avatar, box({1, 1, 1}));
+    registry.emplace<Mesh>(avatar, test::boxMesh({1, 1, 1}));
     registry.emplace<WorldTransform>(avatar, kIdentity);
     registry.emplace<Avatar>(avatar);
     RayScene scene;
@@ -382,7 +357,7 @@ TEST(RayScene, ClosedRoomDoesNotLeakThroughEdgesOrCorners) {
     // robust mode about 1% of the edge rays and 7% of the corner rays slip through.)
     const glm::vec3 half(2.f, 1.5f, 3.f), centre(0.3f, 0.1f, -0.2f);
     Registry registry;
-    addMesh(registry, box(half, true), translation(centre.x, centre.y, centre.z), Mobility::Static);
+    addMesh(registry, test::boxMesh(half, true), translation(centre.x, centre.y, centre.z), Mobility::Static);
     RayScene scene;
     scene.build(registry);
     std::mt19937 rng(3);
@@ -416,7 +391,7 @@ TEST(RayScene, MovedMobileIsHitAtItsNewPoseAndMissedAtItsOld) {
     Registry registry;
     addMesh(registry, quad(-10, -10, 10, 10), translation(0, 0, -5), Mobility::Static); // floor
     const Entity crate =
-        addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(0, 0, 0), Mobility::Mobile);
+        addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, 0), Mobility::Mobile);
     RayScene scene;
     scene.build(registry);
     const Ray atOld = ray({0.1f, 0.2f, 3}, {0, 0, -1});
@@ -447,9 +422,9 @@ TEST(RayScene, MovedMobileIsHitAtItsNewPoseAndMissedAtItsOld) {
 TEST(RayScene, TwoMobilesMoveInOneFrame) {
     Registry registry;
     const Entity a =
-        addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(-3, 0, 0), Mobility::Mobile, "a");
+        addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(-3, 0, 0), Mobility::Mobile, "a");
     const Entity b =
-        addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(3, 0, 0), Mobility::Mobile, "b");
+        addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(3, 0, 0), Mobility::Mobile, "b");
     RayScene scene;
     scene.build(registry);
     registry.clearChanges();
@@ -471,7 +446,7 @@ TEST(RayScene, SetMobilePoseMovesOneMobileAndRejectsBadPoses) {
     Registry registry;
     const Entity wall = addMesh(registry, quad(-1, -1, 1, 1), kIdentity, Mobility::Static);
     const Entity crate =
-        addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(0, 0, 2), Mobility::Mobile);
+        addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, 2), Mobility::Mobile);
     RayScene scene;
     scene.build(registry);
     const Ray down = ray({0, 0, 5}, {0, 0, -1});
@@ -493,9 +468,9 @@ TEST(RayScene, IntersectMobileSeesOnlyThatMobileAtTheGivenPose) {
     Registry registry;
     // A static wall at z = 1 hides everything below it from a ray coming down.
     addMesh(registry, quad(-10, -10, 10, 10), translation(0, 0, 1), Mobility::Static);
-    const Entity crate = addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(0, 0, -2),
+    const Entity crate = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, -2),
                                  Mobility::Mobile, "crate");
-    const Entity other = addMesh(registry, box({0.5f, 0.5f, 0.5f}), translation(3, 0, -2),
+    const Entity other = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(3, 0, -2),
                                  Mobility::Mobile, "other");
     RayScene scene;
     scene.build(registry);
@@ -575,7 +550,7 @@ TEST(RayScene, WorksWithoutStaticMeshesOrWithoutMobiles) {
     }
     {
         Registry registry;
-        const Entity crate = addMesh(registry, box({1, 1, 1}), kIdentity, Mobility::Mobile);
+        const Entity crate = addMesh(registry, test::boxMesh({1, 1, 1}), kIdentity, Mobility::Mobile);
         RayScene scene;
         scene.build(registry);
         EXPECT_EQ(scene.staticTriangleCount(), 0u);
