@@ -46,7 +46,6 @@ Mesh quad(float x0, float y0, float x1, float y1) {
     return mesh;
 }
 
-
 enum class Mobility { Static, Mobile };
 
 Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world, Mobility mobility,
