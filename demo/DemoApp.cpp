@@ -78,6 +78,11 @@ int runDemo(const DemoOptions& options) {
     } else {
         frameSettings.photons.reset();
     }
+    if (options.pointCache || !options.pointCacheFile.empty() || options.showPoints) {
+        frameSettings.pointCache = PointCacheSettings{};
+        frameSettings.pointCache->seed = options.seed;
+        frameSettings.pointCache->cacheFile = options.pointCacheFile;
+    }
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();
     render.height = window.height();
@@ -86,6 +91,8 @@ int runDemo(const DemoOptions& options) {
         options.exposure > 0.f ? options.exposure : world.ctx().get<SceneInfo>().exposure;
     FrameSchedule frame(world, frameSettings);
     FlyController controller(window.handle());
+    if (frame.renderer()) frame.renderer()->setShowPointCache(options.showPoints);
+    bool pointKeyWasDown = false;
     if (!options.headless)
         frame.schedule().add("input", "input", [&](Registry& r, const FrameContext& f) {
             controller.update(r, f);
@@ -104,6 +111,12 @@ int runDemo(const DemoOptions& options) {
         window.pollEvents();
         if (window.shouldClose()) break;
         if (!options.headless && glfwGetKey(window.handle(), GLFW_KEY_ESCAPE) == GLFW_PRESS) break;
+        if (!options.headless && frame.renderer()) { // P: point-set view on / off
+            const bool down = glfwGetKey(window.handle(), GLFW_KEY_P) == GLFW_PRESS;
+            if (down && !pointKeyWasDown)
+                frame.renderer()->setShowPointCache(!frame.renderer()->showPointCache());
+            pointKeyWasDown = down;
+        }
 
         const auto now = std::chrono::steady_clock::now();
         const double realDt = std::chrono::duration<double>(now - last).count();

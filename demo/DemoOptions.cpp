@@ -73,6 +73,14 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
                    "er eg eb (W/m^2) and a mobile flag per vertex");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
+    app.add_flag("--point-cache", o.pointCache,
+                 "Build the point cache (soft shadows of area lights and indirect light per "
+                 "fragment on the surfaces tagged for it; hybrid mode)");
+    app.add_option("--point-cache-file", o.pointCacheFile,
+                   "Point cache file: loaded when it matches the scene and settings, else "
+                   "rebuilt and written (implies --point-cache)");
+    app.add_flag("--show-points", o.showPoints,
+                 "Start with the point-set view on (key P toggles it; implies --point-cache)");
 
     try {
         app.parse(argc, argv);

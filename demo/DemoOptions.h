@@ -28,6 +28,9 @@ struct DemoOptions {
     std::optional<std::string> exportScene; ///< .gltf or .glb path, written after loading
     std::optional<std::string> exportIrradiance; ///< .ply path, written after the last frame
     bool quiet = false;
+    bool pointCache = false;       ///< build (or load) the point cache; shade PointCacheShaded
+    std::string pointCacheFile;    ///< its cache file; empty: build every start
+    bool showPoints = false;       ///< start with the point-set view on (key P toggles it)
 };
 
 /// Parses argv. Returns the options, or an exit code when the program should stop now

@@ -6,6 +6,7 @@
 
 #include "common/lighting.glsl"
 #include "common/sh.glsl"
+#include "common/pointcache.glsl"
 
 layout(location = UNIFORM_ALBEDO) uniform vec3 uAlbedo;
 layout(location = UNIFORM_EMISSION) uniform vec3 uEmission;
@@ -32,11 +33,22 @@ void main() {
 
     vec3 albedo = uAlbedo * texture(uBaseColor, vIn.uv).rgb;
     vec3 irradiance = vec3(0.0);
-    if (uLighting == LIGHTING_VERTEX) irradiance = vIn.irradiance;
+    if (uLighting == LIGHTING_VERTEX || uLighting == LIGHTING_POINT_CACHE)
+        irradiance = vIn.irradiance;
     else if (uLighting == LIGHTING_SH) irradiance = shIrradiance(uSh, n);
+    // Point cache (hybrid mode): soft shadows of area lights + indirect light, per fragment.
+    float nearest = 1e9;
+    if (uLighting == LIGHTING_POINT_CACHE || uPointParams.w > 0.5) {
+        vec4 cached = pointCacheIrradiance(vIn.worldPosition, n, nearest);
+#ifdef HYBRID
+        if (uLighting == LIGHTING_POINT_CACHE && cached.w > 0.0) irradiance = cached.rgb;
+#endif
+    }
 #ifdef HYBRID
     irradiance += directIrradiance(vIn.worldPosition, n);
 #endif
 
     oRadiance = vec4(albedo * (1.0 / PI) * irradiance + uEmission, 1.0);
+    // Point-set view: a dot of a fifth of the spacing radius on every cache point.
+    if (uPointParams.w > 0.5 && nearest < 0.2) oRadiance = vec4(4.0, 0.5, 0.1, 1.0);
 }

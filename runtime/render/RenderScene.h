@@ -2,6 +2,7 @@
 
 #include <epoxy/gl.h>
 #include <glm/mat4x4.hpp>
+#include <glm/vec4.hpp>
 #include <glm/vec3.hpp>
 
 #include <array>
@@ -17,6 +18,22 @@ enum class SurfaceLighting : std::uint8_t {
     None,               ///< no indirect light known: 0
     VertexIrradiance,   ///< per-vertex irradiance buffer of the GpuMesh, Gouraud-interpolated
     SphericalHarmonics, ///< `sh` evaluated per pixel at the shading normal (avatars)
+    /// Hybrid mode: the point cache blended per fragment (RenderScene::pointCache), the
+    /// per-vertex irradiance where no cache point is in range; photon mode: as VertexIrradiance.
+    PointCache,
+};
+
+/// The point cache's GPU copy (shaders/common/pointcache.glsl): three shader storage buffers
+/// and the grid's parameters. Owned by the caller; `points` 0: no cache.
+struct PointCacheView {
+    GLuint points = 0;     ///< per point: vec4 position + R, vec4 normal + AO, vec4 E + r
+    GLuint cellStart = 0;  ///< uint per cell + 1
+    GLuint cellPoints = 0; ///< uint per entry
+    glm::vec4 grid{0.f};   ///< origin (metres), cell size (metres)
+    glm::ivec4 dims{0};    ///< cells along x, y, z; falloff exponent
+    float minNormalCosine = 0.5f;
+    float planeTolerance = 0.5f;
+    bool showPoints = false; ///< draw the point set over the surfaces (debug view)
 };
 
 /// One mesh to draw this frame. Per-frame data: the pointers live until the frame is drawn.
@@ -64,6 +81,7 @@ struct RenderScene {
     /// Since the previous frame a movable caster moved, appeared or disappeared: the shadow
     /// maps that see one, now or before, are refreshed.
     bool movableCastersChanged = true;
+    const PointCacheView* pointCache = nullptr; ///< null: no point cache
 };
 
 } // namespace qgi

@@ -122,6 +122,9 @@ SceneRenderer::SceneRenderer(const RenderSettings& settings)
       mLdrTarget(createFramebufferFor(mLdrColor, nullptr)), mLightBlock(createBuffer()),
       mWhite(createColorTexture(1, 1, kWhite, false)), mNoVertices(createVertexArray()) {
     glNamedBufferStorage(mLightBlock.id(), sizeof(GpuLightBlock), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    mNoPointCache = createBuffer();
+    const std::uint32_t zeros[4] = {0, 0, 0, 0};
+    glNamedBufferStorage(mNoPointCache.id(), sizeof zeros, zeros, 0);
     if (mTimer.cpuTimed()) logInfo("render passes are timed on the CPU around glFinish");
 }
 
@@ -198,6 +201,21 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
     glProgramUniform3fv(program, kCameraPosition, 1, glm::value_ptr(scene.camera.position));
     glBindBufferBase(GL_UNIFORM_BUFFER, kLightBlockBinding, mLightBlock.id());
     mShadows.bindTexture(kShadowUnit);
+    const PointCacheView* cache = scene.pointCache && scene.pointCache->points ? scene.pointCache
+                                                                              : nullptr;
+    const GLuint none = mNoPointCache.id();
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kPointCachePointsBinding, cache ? cache->points : none);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kPointCacheCellStartBinding,
+                     cache ? cache->cellStart : none);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, kPointCacheCellPointsBinding,
+                     cache ? cache->cellPoints : none);
+    if (cache) {
+        glProgramUniform4fv(program, kPointCacheGrid, 1, glm::value_ptr(cache->grid));
+        glProgramUniform4iv(program, kPointCacheDims, 1, glm::value_ptr(cache->dims));
+    }
+    glProgramUniform4f(program, kPointCacheParams, cache ? cache->minNormalCosine : 0.f,
+                       cache ? cache->planeTolerance : 0.f, cache ? 1.f : 0.f,
+                       cache && cache->showPoints ? 1.f : 0.f);
 
     for (const DrawItem& item : scene.items) {
         const glm::mat3 linear(item.model);

@@ -54,6 +54,7 @@ private:
     GlFramebuffer mLdrTarget;
     GlBuffer mLightBlock;
     GlTexture mWhite;          ///< bound where an item has no base colour texture
+    GlBuffer mNoPointCache;    ///< 16 zero bytes on the point-cache bindings when there is none
     GlVertexArray mNoVertices; ///< the fullscreen triangle needs a vertex array, not data
     bool mWarnedLightLimit = false;
 };

@@ -26,6 +26,12 @@ std::string shaderInterfaceDefines() {
     define("UNIFORM_SH", kSh);
     define("UNIFORM_CAMERA_POSITION", kCameraPosition);
     define("UNIFORM_EXPOSURE", kExposure);
+    define("UNIFORM_POINT_CACHE_GRID", kPointCacheGrid);
+    define("UNIFORM_POINT_CACHE_DIMS", kPointCacheDims);
+    define("UNIFORM_POINT_CACHE_PARAMS", kPointCacheParams);
+    define("POINT_CACHE_POINTS_BINDING", kPointCachePointsBinding);
+    define("POINT_CACHE_CELL_START_BINDING", kPointCacheCellStartBinding);
+    define("POINT_CACHE_CELL_POINTS_BINDING", kPointCacheCellPointsBinding);
     define("BASE_COLOR_UNIT", kBaseColorUnit);
     define("HDR_UNIT", kHdrUnit);
     define("SHADOW_UNIT", kShadowUnit);
@@ -37,6 +43,7 @@ std::string shaderInterfaceDefines() {
     define("LIGHT_DIRECTIONAL", int(LightType::Directional));
     define("LIGHTING_VERTEX", int(SurfaceLighting::VertexIrradiance));
     define("LIGHTING_SH", int(SurfaceLighting::SphericalHarmonics));
+    define("LIGHTING_POINT_CACHE", int(SurfaceLighting::PointCache));
     return out;
 }
 

@@ -19,12 +19,18 @@ constexpr int kMirrored = 15;
 constexpr int kSh = 16; // vec3[9]
 constexpr int kCameraPosition = 25;
 constexpr int kExposure = 26;
+constexpr int kPointCacheGrid = 27;   // vec4: grid origin, cell size (shaders/common/pointcache.glsl)
+constexpr int kPointCacheDims = 28;   // ivec4: cells per axis, falloff exponent
+constexpr int kPointCacheParams = 29; // vec4: min normal cosine, plane tolerance, enabled, show
 
 // Texture units and buffer binding points.
 constexpr int kBaseColorUnit = 0;
 constexpr int kHdrUnit = 0;
 constexpr int kShadowUnit = 1;
 constexpr int kLightBlockBinding = 0;
+constexpr int kPointCachePointsBinding = 1; // shader storage buffers of the point cache
+constexpr int kPointCacheCellStartBinding = 2;
+constexpr int kPointCacheCellPointsBinding = 3;
 
 // Array sizes: lights in the light block; shadow layers (a point light takes 6, a spot or
 // directional light 1).

@@ -7,6 +7,7 @@
 #include "components/DirectionalLight.h"
 #include "components/MobileMesh.h"
 #include "components/PathFollower.h"
+#include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -355,22 +356,29 @@ void addStructure(BuiltinSceneBuilder& builder) {
         registry.emplace<StaticMesh>(
             builder.addMesh(std::move(name), Transform{}, std::move(mesh), material));
     };
+    // Large, coarsely tessellated surfaces take their soft shadows and indirect light from the
+    // point cache when one is built (PointCacheShaded).
+    const auto addCoarse = [&](std::string name, ProceduralMesh&& mesh, const Material& material) {
+        const Entity e = builder.addMesh(std::move(name), Transform{}, std::move(mesh), material);
+        registry.emplace<StaticMesh>(e);
+        registry.emplace<PointCacheShaded>(e);
+    };
     const glm::vec3 up(0.f, 1.f, 0.f);
 
     ProceduralMesh court;
     court.addQuad({-kColonnade, 0.f, -kColonnade}, {kColonnade, 0.f, -kColonnade},
                   {kColonnade, 0.f, kColonnade}, {-kColonnade, 0.f, kColonnade}, up);
-    addStatic("court floor", std::move(court), surface({0.62f, 0.36f, 0.24f}, 0.6f));
-    addStatic("gallery floor", frame(kColonnade, kOuter, 0.f, up), surface({0.55f, 0.52f, 0.47f}));
+    addCoarse("court floor", std::move(court), surface({0.62f, 0.36f, 0.24f}, 0.6f));
+    addCoarse("gallery floor", frame(kColonnade, kOuter, 0.f, up), surface({0.55f, 0.52f, 0.47f}));
 
     ProceduralMesh walls;
     const ProceduralMesh wallSide = outerWallSide();
     appendOnAllSides(walls, wallSide, kOuter);
-    addStatic("outer walls", std::move(walls), surface({0.78f, 0.72f, 0.62f}));
+    addCoarse("outer walls", std::move(walls), surface({0.78f, 0.72f, 0.62f}));
 
-    addStatic("first floor", slab(kFirstFloorUnderside, kFirstFloorTop),
+    addCoarse("first floor", slab(kFirstFloorUnderside, kFirstFloorTop),
               surface({0.80f, 0.78f, 0.74f}));
-    addStatic("roof", slab(kRoofUnderside, kRoofTop), surface({0.70f, 0.66f, 0.60f}));
+    addCoarse("roof", slab(kRoofUnderside, kRoofTop), surface({0.70f, 0.66f, 0.60f}));
 
     ProceduralMesh arcade;
     appendOnAllSides(arcade, arcadeSide(), kColonnade);

@@ -17,6 +17,11 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.irradiance");
         mIrradiance->build(registry);
     }
+    if (settings.pointCache) {
+        mPointCache = std::make_unique<PointCacheSystem>(*settings.pointCache);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.pointcache");
+        mPointCache->build(registry);
+    }
     if (settings.render) mRender = std::make_unique<RenderSystem>(*settings.render);
 
     mSchedule.addPhase("input")
@@ -25,6 +30,7 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         .addPhase("raytrace.sync")
         .addPhase("photon.update")
         .addPhase("detp.irradiance")
+        .addPhase("point.cache")
         .addPhase("render");
 
     mSchedule.add("animation", "animation",
@@ -40,6 +46,9 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         mSchedule.add("detp.irradiance", "detp.irradiance",
                       [this](Registry& r, const FrameContext& f) { mIrradiance->update(r, f); });
     }
+    if (mPointCache)
+        mSchedule.add("point.cache", "point.cache",
+                      [this](Registry& r, const FrameContext& f) { mPointCache->update(r, f); });
     if (mRender)
         mSchedule.add("render", "render",
                       [this](Registry& r, const FrameContext& f) { mRender->update(r, f); });

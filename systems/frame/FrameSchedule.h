@@ -5,6 +5,7 @@
 #include "systems/animation/AnimationSystem.h"
 #include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
+#include "systems/point_cache/PointCacheSystem.h"
 #include "systems/render/RenderSystem.h"
 #include "systems/transform/TransformSystem.h"
 
@@ -17,6 +18,9 @@ struct FrameSettings {
     /// Photon transport and per-vertex irradiance; off: no global illumination (direct only).
     std::optional<PhotonSettings> photons = PhotonSettings{};
     DetpSettings irradiance;
+    /// The point cache (soft shadows of area lights and indirect light blended per fragment on
+    /// surfaces tagged PointCacheShaded); off unless set. Built (or loaded) at construction.
+    std::optional<PointCacheSettings> pointCache;
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
     std::optional<RenderSettings> render = RenderSettings{};
 };
@@ -29,6 +33,8 @@ struct FrameSettings {
  *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
  *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
  *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
+ *    point.cache       point cache: indirect from the photon delta, soft shadows around moved
+ *                      mobiles within a per-frame budget
  *    render            uploads dirty ranges, draws, tonemaps
  *
  *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
@@ -42,6 +48,7 @@ public:
     RenderSystem* renderer() { return mRender.get(); }
     PhotonUpdateSystem* photons() { return mPhotons.get(); }
     DetpIrradianceSystem* irradiance() { return mIrradiance.get(); }
+    PointCacheSystem* pointCache() { return mPointCache.get(); }
 
 private:
     Schedule mSchedule;
@@ -49,6 +56,7 @@ private:
     TransformSystem mTransform;
     std::unique_ptr<PhotonUpdateSystem> mPhotons;
     std::unique_ptr<DetpIrradianceSystem> mIrradiance;
+    std::unique_ptr<PointCacheSystem> mPointCache;
     std::unique_ptr<RenderSystem> mRender;
 };
 

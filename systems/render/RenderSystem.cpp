@@ -8,6 +8,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/ShLighting.h"
 #include "components/SpotLight.h"
@@ -19,6 +20,7 @@
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GpuTexture.h"
 #include "runtime/scene/TextureLibrary.h"
+#include "systems/point_cache/PointCache.h"
 #include "systems/render/GpuResources.h"
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -63,6 +65,7 @@ void RenderSystem::update(Registry& registry, const FrameContext& frame) {
     if (!gpu) gpu = &registry.ctx().emplace<GpuResources>();
 
     RenderScene scene;
+    if (syncPointCache(registry)) scene.pointCache = &mPointCacheView;
     syncMeshes(registry, *gpu, scene);
     collectLights(registry);
     scene.lights = mLights;
@@ -132,9 +135,55 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
             const ShLighting* sh = registry.tryGet<ShLighting>(e);
             item.sh = sh ? sh->coefficients : std::array<glm::vec3, 9>{};
         } else if (irradiance) {
-            item.lighting = SurfaceLighting::VertexIrradiance;
+            item.lighting = scene.pointCache && registry.has<PointCacheShaded>(e)
+                                ? SurfaceLighting::PointCache
+                                : SurfaceLighting::VertexIrradiance;
         }
     });
+}
+
+bool RenderSystem::syncPointCache(const Registry& registry) {
+    const PointCache* cache = registry.ctx().find<PointCache>();
+    if (!cache || cache->size() == 0 || cache->grid.pointCount() != cache->size()) return false;
+    const bool newSet = mCacheSet != cache->pointSetVersion || !mCachePoints;
+    if (newSet) {
+        // The grid and the point geometry: once per point set.
+        mCachePoints = createBuffer();
+        mCacheCellStart = createBuffer();
+        mCacheCellPoints = createBuffer();
+        const auto starts = cache->grid.cellStart();
+        const auto entries = cache->grid.cellPoints();
+        glNamedBufferStorage(mCacheCellStart.id(), GLsizeiptr(starts.size_bytes()), starts.data(), 0);
+        const std::uint32_t none = 0;
+        glNamedBufferStorage(mCacheCellPoints.id(),
+                             GLsizeiptr(entries.empty() ? sizeof none : entries.size_bytes()),
+                             entries.empty() ? &none : entries.data(), 0);
+        glNamedBufferStorage(mCachePoints.id(), GLsizeiptr(cache->size() * 3 * sizeof(glm::vec4)),
+                             nullptr, GL_DYNAMIC_STORAGE_BIT);
+        const PointGrid& grid = cache->grid;
+        mPointCacheView.grid = glm::vec4(grid.origin(), grid.cellSize());
+        mPointCacheView.dims = glm::ivec4(grid.dims(), int(cache->settings.falloffExponent));
+        mPointCacheView.minNormalCosine = grid.params().minNormalCosine;
+        mPointCacheView.planeTolerance = grid.params().planeTolerance;
+        mPointCacheView.points = mCachePoints.id();
+        mPointCacheView.cellStart = mCacheCellStart.id();
+        mPointCacheView.cellPoints = mCacheCellPoints.id();
+        mCacheSet = cache->pointSetVersion;
+    }
+    if (newSet || mCacheVersion != cache->shadingVersion) {
+        mCacheStaging.resize(cache->size() * 3);
+        for (std::size_t p = 0; p < cache->size(); ++p) {
+            mCacheStaging[3 * p] = glm::vec4(cache->position[p], cache->searchRadius(std::uint32_t(p)));
+            mCacheStaging[3 * p + 1] = glm::vec4(cache->normal[p], cache->ao[p]);
+            mCacheStaging[3 * p + 2] =
+                glm::vec4(cache->direct[p] + cache->indirect[p], cache->radius[p]);
+        }
+        glNamedBufferSubData(mCachePoints.id(), 0,
+                             GLsizeiptr(mCacheStaging.size() * sizeof(glm::vec4)),
+                             mCacheStaging.data());
+        mCacheVersion = cache->shadingVersion;
+    }
+    return true;
 }
 
 void RenderSystem::sortFrontToBack(const glm::vec3& eye) {

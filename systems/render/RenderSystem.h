@@ -30,6 +30,8 @@ struct GpuResources;
  *          const Avatar, const ShLighting, const PointLight, const SpotLight,
  *          const DirectionalLight, const Name (logs), ctx<const TextureLibrary>,
  *          ctx<FrameProfiler> (pass times)
+ *  Surfaces tagged PointCacheShaded are shaded from ctx<PointCache> per fragment (hybrid
+ *  mode), its points and grid uploaded as shader storage buffers when they change.
  *  Writes: VertexIrradiance::dirty (uploaded, then cleared), ctx<GpuResources>
  *  Needs a current GL 4.5 context from construction to destruction.                      */
 class RenderSystem {
@@ -45,6 +47,9 @@ public:
     void requestScreenshot(const std::filesystem::path& base);
 
     void setExposure(float exposure) { mRenderer.setExposure(exposure); }
+    /// Debug view: draw the point cache's points as dots over the surfaces.
+    void setShowPointCache(bool show) { mPointCacheView.showPoints = show; }
+    bool showPointCache() const { return mPointCacheView.showPoints; }
     const RenderSettings& settings() const { return mRenderer.settings(); }
 
     /// The last frame: radiance W/(m^2 sr), and tonemapped sRGB; top row first.
@@ -58,12 +63,19 @@ private:
     void sortFrontToBack(const glm::vec3& eye);
     GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
     void writeScreenshot(const std::filesystem::path& base) const;
+    bool syncPointCache(const Registry& registry);
 
     SceneRenderer mRenderer;
     std::vector<DrawItem> mItems;
     std::vector<RenderLight> mLights;
     std::vector<Entity> mStale;
     std::optional<std::filesystem::path> mScreenshot;
+    // The point cache's GPU copy (shaders/common/pointcache.glsl).
+    GlBuffer mCachePoints, mCacheCellStart, mCacheCellPoints;
+    PointCacheView mPointCacheView;
+    std::uint64_t mCacheSet = ~0ull;       ///< pointSetVersion of the uploaded point set
+    std::uint64_t mCacheVersion = ~0ull;   ///< its shadingVersion at the last upload
+    std::vector<glm::vec4> mCacheStaging;
     bool mWarnedNoCamera = false;
     bool mWarnedTexture = false;
 };

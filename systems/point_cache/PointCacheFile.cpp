@@ -1,0 +1,227 @@
+#include "systems/point_cache/PointCacheFile.h"
+
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
+#include "runtime/ecs/Registry.h"
+#include "systems/photon_update/PhotonEmitter.h"
+#include "systems/photon_update/PhotonSettings.h"
+#include "systems/point_cache/PointCache.h"
+
+#include <glm/geometric.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <vector>
+
+namespace qgi {
+namespace {
+
+constexpr char kMagic[8] = {'Q', 'G', 'I', 'P', 'C', 'A', 'C', 'H'};
+constexpr std::uint32_t kEndian = 0x01020304u;
+
+class Fnv {
+public:
+    void bytes(const void* data, std::size_t size) {
+        const auto* p = static_cast<const unsigned char*>(data);
+        for (std::size_t i = 0; i < size; ++i) {
+            mHash ^= p[i];
+            mHash *= 0x100000001b3ull;
+        }
+    }
+    template <typename T> void value(const T& v) { bytes(&v, sizeof v); }
+    template <typename T> void array(const std::vector<T>& v) {
+        value(std::uint64_t(v.size()));
+        if (!v.empty()) bytes(v.data(), v.size() * sizeof(T));
+    }
+    std::uint64_t get() const { return mHash; }
+
+private:
+    std::uint64_t mHash = 0xcbf29ce484222325ull;
+};
+
+void put(std::vector<char>& out, const void* data, std::size_t size) {
+    const char* p = static_cast<const char*>(data);
+    out.insert(out.end(), p, p + size);
+}
+template <typename T> void putValue(std::vector<char>& out, const T& v) { put(out, &v, sizeof v); }
+template <typename T> void putArray(std::vector<char>& out, const std::vector<T>& v) {
+    if (!v.empty()) put(out, v.data(), v.size() * sizeof(T));
+}
+
+class Reader {
+public:
+    Reader(const std::vector<char>& data, std::size_t end, const std::string& path)
+        : mData(data), mEnd(end), mPath(path) {}
+    void get(void* out, std::size_t size) {
+        if (size > mEnd - mAt) fail("point cache file '", mPath, "' is truncated");
+        std::memcpy(out, mData.data() + mAt, size);
+        mAt += size;
+    }
+    template <typename T> T value() {
+        T v;
+        get(&v, sizeof v);
+        return v;
+    }
+    template <typename T> void array(std::vector<T>& v, std::size_t count) {
+        if (count > (mEnd - mAt) / sizeof(T)) fail("point cache file '", mPath, "' is truncated");
+        v.resize(count);
+        if (count) get(v.data(), count * sizeof(T));
+    }
+    std::size_t remaining() const { return mEnd - mAt; }
+
+private:
+    const std::vector<char>& mData;
+    std::size_t mEnd, mAt = 0;
+    const std::string& mPath;
+};
+
+} // namespace
+
+std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& s) {
+    Fnv h;
+    h.value(kPointCacheFileVersion);
+    for (const auto v : {s.seed, std::uint64_t(s.particleCount), std::uint64_t(s.particleBounces),
+                         std::uint64_t(s.stopAfterRejections), s.maxDarts,
+                         std::uint64_t(s.maxPoints), std::uint64_t(s.aoRays),
+                         std::uint64_t(s.trivialTests), std::uint64_t(s.shadowSamples)})
+        h.value(v);
+    for (const float v : {s.rMin, s.rMax, s.aoDistance})
+        h.value(v);
+    const auto mesh = [&](Entity, const Mesh& m, const WorldTransform& world, bool mobile) {
+        h.value(std::uint8_t(mobile));
+        h.value(world.matrix);
+        h.array(m.positions);
+        h.array(m.indices);
+    };
+    registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
+        [&](Entity e, const StaticMesh&, const Mesh& m, const WorldTransform& w) {
+            mesh(e, m, w, false);
+            if (const Material* mat = registry.tryGet<Material>(e)) h.value(mat->emission);
+        });
+    registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
+        [&](Entity e, const MobileMesh&, const Mesh& m, const WorldTransform& w) {
+            mesh(e, m, w, true);
+            if (const Material* mat = registry.tryGet<Material>(e)) h.value(mat->emission);
+        });
+    std::vector<PhotonEmitter> lights;
+    findEmitterSources(registry, PhotonSettings{}, lights);
+    for (const PhotonEmitter& l : lights) {
+        h.value(l.kind);
+        h.value(l.world);
+        h.value(l.radiant);
+        h.value(l.innerAngle);
+        h.value(l.outerAngle);
+    }
+    return h.get();
+}
+
+void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& c) {
+    std::vector<char> out;
+    put(out, kMagic, sizeof kMagic);
+    putValue(out, kPointCacheFileVersion);
+    putValue(out, kEndian);
+    putValue(out, key);
+    const std::size_t totalAt = out.size();
+    putValue(out, std::uint64_t(0)); // total bytes, patched below
+    putValue(out, std::uint64_t(c.size()));
+    putValue(out, c.lightCount);
+    putArray(out, c.position);
+    putArray(out, c.normal);
+    putArray(out, c.radius);
+    putArray(out, c.dart);
+    putArray(out, c.ao);
+    putArray(out, c.direct);
+    putArray(out, c.visibility);
+    const std::uint64_t total = out.size() + sizeof(std::uint64_t);
+    std::memcpy(out.data() + totalAt, &total, sizeof total);
+    Fnv sum;
+    sum.bytes(out.data(), out.size());
+    putValue(out, sum.get());
+
+    const std::string temp = path + ".tmp";
+    {
+        std::ofstream file(temp, std::ios::binary | std::ios::trunc);
+        if (!file) fail("cannot write point cache file '", temp, "'");
+        file.write(out.data(), std::streamsize(out.size()));
+        if (!file) fail("cannot write point cache file '", temp, "'");
+    }
+    std::error_code error;
+    std::filesystem::rename(temp, path, error);
+    if (error) fail("cannot rename '", temp, "' to '", path, "': ", error.message());
+}
+
+void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& cache) {
+    std::ifstream file(path, std::ios::binary);
+    if (!file) fail("point cache file '", path, "' cannot be opened");
+    std::vector<char> data((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+    if (data.size() < sizeof kMagic + 36 + sizeof(std::uint64_t))
+        fail("point cache file '", path, "' is truncated (", data.size(), " bytes)");
+    if (std::memcmp(data.data(), kMagic, sizeof kMagic) != 0)
+        fail("point cache file '", path, "' is not a point cache file (bad magic)");
+    const std::size_t body = data.size() - sizeof(std::uint64_t);
+    Reader in(data, body, path);
+    char magic[8];
+    in.get(magic, sizeof magic);
+    const auto version = in.value<std::uint32_t>();
+    if (version != kPointCacheFileVersion)
+        fail("point cache file '", path, "' has version ", version, ", expected ",
+             kPointCacheFileVersion, " (stale)");
+    if (in.value<std::uint32_t>() != kEndian)
+        fail("point cache file '", path, "' was written on a machine of other byte order");
+    if (in.value<std::uint64_t>() != key)
+        fail("point cache file '", path, "' was made for another scene or other settings (stale)");
+    const auto total = in.value<std::uint64_t>();
+    if (total != data.size())
+        fail("point cache file '", path, "' is truncated or extended (", data.size(),
+             " bytes, its header says ", total, ")");
+    std::uint64_t stored = 0;
+    std::memcpy(&stored, data.data() + body, sizeof stored);
+    Fnv sum;
+    sum.bytes(data.data(), body);
+    if (sum.get() != stored) fail("point cache file '", path, "' is corrupt (checksum mismatch)");
+
+    const auto points = in.value<std::uint64_t>();
+    const auto lights = in.value<std::uint32_t>();
+    const std::uint64_t perPoint = 4 * (3 + 3 + 1 + 1 + 1 + 3) + 4ull * lights;
+    if (points > in.remaining() / perPoint || points * perPoint != in.remaining())
+        fail("point cache file '", path, "' has a size that does not match its ", points,
+             " points and ", lights, " lights");
+    PointCache read;
+    in.array(read.position, points);
+    in.array(read.normal, points);
+    in.array(read.radius, points);
+    in.array(read.dart, points);
+    in.array(read.ao, points);
+    in.array(read.direct, points);
+    in.array(read.visibility, points * lights);
+    for (std::size_t p = 0; p < points; ++p) {
+        const auto finite = [](const glm::vec3& v) {
+            return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+        };
+        const float nl = glm::length(read.normal[p]);
+        if (!finite(read.position[p]) || !finite(read.direct[p]) || !(std::abs(nl - 1.f) < 1e-3f) ||
+            !(read.radius[p] > 0.f && std::isfinite(read.radius[p])) ||
+            !(read.ao[p] >= 0.f && read.ao[p] <= 1.f))
+            fail("point cache file '", path, "': point ", p, " holds values out of range");
+    }
+    for (const float v : read.visibility)
+        if (!(v >= 0.f && v <= 1.f))
+            fail("point cache file '", path, "': a visibility is outside [0, 1]");
+    cache.position = std::move(read.position);
+    cache.normal = std::move(read.normal);
+    cache.radius = std::move(read.radius);
+    cache.dart = std::move(read.dart);
+    cache.ao = std::move(read.ao);
+    cache.direct = std::move(read.direct);
+    cache.visibility = std::move(read.visibility);
+    cache.lightCount = lights;
+}
+
+} // namespace qgi

@@ -1,0 +1,37 @@
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace qgi {
+
+class Registry;
+struct PointCache;
+struct PointCacheSettings;
+
+/// Version of the cache file layout; a file of another version is stale.
+inline constexpr std::uint32_t kPointCacheFileVersion = 1;
+
+/** Key of a cache file: FNV-1a 64 over the file version, every setting that shapes the point
+ *  set or its stored shading (resolved values), the scene's static and mobile meshes (world
+ *  matrix, positions, indices, emission) and every light (kind, pose, colour x intensity,
+ *  cone). Any change to those gives a different key, so a file made for another scene or
+ *  other settings is never used.                                                           */
+std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& resolved);
+
+/** File layout (the writing machine's byte order; an endianness marker rejects others):
+ *  "QGIPCACH", u32 version, u32 0x01020304, u64 key, u64 file size in bytes, u64 points,
+ *  u32 lights, then per array for all points: position (3 f32), normal (3 f32), radius f32, dart u32, ao f32,
+ *  direct (3 f32), visibility (lights f32 per point); then u64 FNV-1a of every byte before it.
+ *  Written to "<path>.tmp" and renamed, so a crash never leaves half a file under `path`.
+ *  Throws qgi::Error when the file cannot be written.                                     */
+void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& cache);
+
+/** Reads a file written by writePointCacheFile into `cache` (point set, ao, direct,
+ *  visibility; the settings and grid are the caller's). Throws qgi::Error with the reason, and
+ *  leaves `cache` untouched, when the file is missing, truncated, of another version or
+ *  machine, made for another key (stale), fails its checksum (corrupt), or holds values out
+ *  of range (non-finite, normals not unit, AO or visibility outside [0, 1]).              */
+void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& cache);
+
+} // namespace qgi

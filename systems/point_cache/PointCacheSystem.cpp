@@ -1,0 +1,270 @@
+#include "systems/point_cache/PointCacheSystem.h"
+
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Log.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "systems/point_cache/PointCacheFile.h"
+
+#include <glm/gtc/constants.hpp>
+#include <glm/geometric.hpp>
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <numeric>
+
+namespace qgi {
+namespace {
+
+/// Distance from c to the segment [a, b].
+float distanceToSegment(const glm::vec3& c, const glm::vec3& a, const glm::vec3& b) {
+    const glm::vec3 ab = b - a;
+    const float len2 = glm::dot(ab, ab);
+    const float t = len2 > 0.f ? std::clamp(glm::dot(c - a, ab) / len2, 0.f, 1.f) : 0.f;
+    return glm::length(a + t * ab - c);
+}
+
+float maxScale(const glm::mat4& m) {
+    return std::max({glm::length(glm::vec3(m[0])), glm::length(glm::vec3(m[1])),
+                     glm::length(glm::vec3(m[2]))});
+}
+
+} // namespace
+
+PointCacheSystem::PointCacheSystem(const PointCacheSettings& settings) : mSettings(settings) {
+    validate(settings);
+}
+
+PointCacheSystem::~PointCacheSystem() = default;
+
+void PointCacheSystem::build(Registry& registry) {
+    RayScene* scene = registry.ctx().find<RayScene>();
+    if (!scene) fail("PointCacheSystem::build: the registry has no RayScene");
+    const Aabb bounds = staticBounds(registry);
+    PointCache& cache = registry.ctx().contains<PointCache>()
+                            ? registry.ctx().get<PointCache>()
+                            : registry.ctx().emplace<PointCache>();
+    const std::uint64_t setVersion = cache.pointSetVersion;
+    cache = PointCache{};
+    cache.pointSetVersion = setVersion + 1;
+    cache.settings = resolvePointCacheSettings(mSettings, bounds);
+    const PointCacheSettings& s = cache.settings;
+    mLights = findAreaLights(registry, bounds);
+    if (mLights.size() > 0xffffu) fail("point cache: more than 65535 area lights");
+
+    const std::uint64_t key = pointCacheKey(registry, s);
+    mLoaded = false;
+    if (!s.cacheFile.empty() && std::filesystem::exists(s.cacheFile)) {
+        try {
+            readPointCacheFile(s.cacheFile, key, cache);
+            if (cache.lightCount != mLights.size())
+                fail("point cache file '", s.cacheFile, "' holds ", cache.lightCount,
+                     " lights, the scene has ", mLights.size(), " (stale)");
+            mLoaded = true;
+            logInfo("point cache: loaded ", cache.size(), " points from '", s.cacheFile, "'");
+        } catch (const Error& error) {
+            logWarning(error.what(), "; rebuilding it");
+            cache.position.clear();
+        }
+    }
+    if (!mLoaded) {
+        mBuildStats = buildPointSet(registry, *scene, s, bounds, cache);
+        cache.lightCount = std::uint32_t(mLights.size());
+        cache.direct.assign(cache.size(), glm::vec3(0.f));
+        cache.visibility.assign(cache.size() * mLights.size(), 1.f);
+        std::vector<std::uint32_t> all(cache.size());
+        std::iota(all.begin(), all.end(), 0u);
+        shadePoints(*scene, cache, all);
+        if (!s.cacheFile.empty()) {
+            writePointCacheFile(s.cacheFile, key, cache);
+            logInfo("point cache: wrote ", cache.size(), " points to '", s.cacheFile, "'");
+        }
+    }
+    cache.indirect.assign(cache.size(), glm::vec3(0.f));
+    cache.buildGrid();
+
+    mDiscs = std::make_unique<DiscIndex>(scene->device(), DiscIndex::Motion::Static);
+    if (cache.size() > 0) mDiscs->build(cache.position, cache.normal, s.detpRadius);
+    mPowerSum.assign(cache.size(), glm::dvec3(0.0));
+    mIsTouched.assign(cache.size(), 0);
+    mQueuedFlag.assign(cache.size(), 0);
+    mQueueKey.assign(cache.size(), 0.f);
+    mQueue.clear();
+
+    mMobiles.clear();
+    registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
+        [&](Entity e, const MobileMesh&, const Mesh& mesh, const WorldTransform& world) {
+            Aabb box;
+            for (const glm::vec3& p : mesh.positions)
+                box.extend(p);
+            if (box.empty()) return;
+            mMobiles[e] = MobileBound{box.center(), 0.5f * glm::length(box.extent()), world.matrix};
+        });
+    mNeedsFull = true;
+    mBuilt = true;
+}
+
+void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
+                                   std::span<const std::uint32_t> points) {
+    const PointCacheSettings& s = cache.settings;
+    const std::size_t lights = mLights.size();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 16),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+            const std::uint32_t p = points[k];
+            glm::vec3 sum(0.f);
+            for (std::size_t l = 0; l < lights; ++l) {
+                const LightSample ls =
+                    shadeAreaLight(scene, mLights[l], std::uint32_t(l), cache.position[p],
+                                   cache.normal[p], s.shadowSamples, s.seed, cache.dart[p]);
+                sum += ls.irradiance;
+                cache.visibility[std::size_t(p) * lights + l] = ls.visibility;
+            }
+            cache.direct[p] = sum;
+        }
+    });
+}
+
+void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments& segments,
+                                        std::span<const std::uint32_t> indices, double sign) {
+    if (indices.empty() || cache.size() == 0) return;
+    mDiscs->collectCrossings(segments, indices, /*skipDirect=*/true, mCrossings);
+    for (const DiscCrossing& c : mCrossings) {
+        mPowerSum[c.disc] += sign * glm::dvec3(segments.power[c.segment]);
+        if (!mIsTouched[c.disc]) {
+            mIsTouched[c.disc] = 1;
+            mTouched.push_back(c.disc);
+        }
+    }
+}
+
+void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache& cache) {
+    struct Move {
+        glm::vec3 before, after;
+        float radiusBefore, radiusAfter;
+    };
+    std::vector<Move> moves;
+    for (const Entity e : registry.changed<WorldTransform>()) {
+        const auto it = mMobiles.find(e);
+        if (it == mMobiles.end()) continue;
+        const WorldTransform* world = registry.tryGet<WorldTransform>(e);
+        if (!world) continue;
+        MobileBound& m = it->second;
+        if (m.pose == world->matrix) continue; // patched without moving
+        Move move;
+        move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));
+        move.radiusBefore = m.radius * maxScale(m.pose);
+        move.after = glm::vec3(world->matrix * glm::vec4(m.centre, 1.f));
+        move.radiusAfter = m.radius * maxScale(world->matrix);
+        m.pose = world->matrix;
+        if (std::isfinite(move.after.x) && std::isfinite(move.radiusAfter)) moves.push_back(move);
+    }
+    if (moves.empty() || cache.size() == 0) return;
+    // Per point: the distance to the nearest moved mobile when a moved mobile (old or new
+    // pose) may stand between it and a light; +inf otherwise. Parallel, then queued in order.
+    std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cache.size(), 256),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t p = range.begin(); p != range.end(); ++p) {
+            const glm::vec3 x = cache.position[p];
+            for (const Move& m : moves)
+                for (const AreaLight& light : mLights) {
+                    const bool before = distanceToSegment(m.before, x, light.centre) <
+                                        m.radiusBefore + light.boundRadius;
+                    const bool after = distanceToSegment(m.after, x, light.centre) <
+                                       m.radiusAfter + light.boundRadius;
+                    if (before || after) {
+                        key[p] = std::min({key[p], glm::length(m.after - x),
+                                           glm::length(m.before - x)});
+                        break;
+                    }
+                }
+        }
+    });
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        if (!std::isfinite(key[p])) continue;
+        if (!mQueuedFlag[p]) {
+            mQueuedFlag[p] = 1;
+            mQueueKey[p] = key[p];
+            mQueue.push_back(std::uint32_t(p));
+            ++mStats.queued;
+        } else {
+            mQueueKey[p] = std::min(mQueueKey[p], key[p]);
+        }
+    }
+}
+
+void PointCacheSystem::update(Registry& registry, const FrameContext&) {
+    mStats = FrameStats{};
+    if (!mBuilt) return;
+    PointCache* cache = registry.ctx().find<PointCache>();
+    RayScene* scene = registry.ctx().find<RayScene>();
+    if (!cache || !scene || cache->size() == 0) return;
+
+    // ---- indirect: DETP on the points' discs --------------------------------------------------
+    const PhotonStore* store = registry.ctx().find<PhotonStore>();
+    const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
+    mTouched.clear();
+    if (store) {
+        const bool full = mNeedsFull || (delta && delta->full);
+        if (full) {
+            mStats.fullIndirect = true;
+            std::fill(mPowerSum.begin(), mPowerSum.end(), glm::dvec3(0.0));
+            mSegments.clear();
+            for (const PhotonPath& path : store->paths)
+                for (std::uint32_t k = 0; k < path.count; ++k)
+                    mSegments.push_back(path.first + k);
+            mStats.deltaSegments = mSegments.size();
+            estimateIndirect(*cache, store->segments, mSegments, 1.0);
+            mNeedsFull = false;
+        } else if (delta && !delta->empty()) {
+            mSegments.resize(delta->oldSegments.size());
+            std::iota(mSegments.begin(), mSegments.end(), 0u);
+            estimateIndirect(*cache, delta->oldSegments, mSegments, -1.0);
+            mSegments.resize(delta->newSegments.size());
+            std::iota(mSegments.begin(), mSegments.end(), 0u);
+            estimateIndirect(*cache, delta->newSegments, mSegments, 1.0);
+            mStats.deltaSegments = delta->oldSegments.size() + delta->newSegments.size();
+        }
+        const double toIrradiance =
+            1.0 / (glm::pi<double>() * double(cache->settings.detpRadius) *
+                   double(cache->settings.detpRadius));
+        if (full) {
+            for (std::size_t p = 0; p < cache->size(); ++p)
+                cache->indirect[p] = glm::vec3(glm::max(mPowerSum[p] * toIrradiance, 0.0));
+            mStats.indirectWritten = cache->size();
+        } else {
+            for (const std::uint32_t p : mTouched)
+                cache->indirect[p] = glm::vec3(glm::max(mPowerSum[p] * toIrradiance, 0.0));
+            mStats.indirectWritten = mTouched.size();
+        }
+        for (const std::uint32_t p : mTouched)
+            mIsTouched[p] = 0;
+    }
+
+    // ---- soft shadows around moved mobiles, within the budget ---------------------------------
+    queueShadowed(registry, *cache);
+    if (!mQueue.empty()) {
+        const std::size_t take = std::min<std::size_t>(mQueue.size(), cache->settings.updateBudget);
+        const auto nearer = [&](std::uint32_t a, std::uint32_t b) {
+            return mQueueKey[a] < mQueueKey[b] || (mQueueKey[a] == mQueueKey[b] && a < b);
+        };
+        std::partial_sort(mQueue.begin(), mQueue.begin() + std::ptrdiff_t(take), mQueue.end(),
+                          nearer);
+        shadePoints(*scene, *cache, std::span<const std::uint32_t>(mQueue).first(take));
+        for (std::size_t k = 0; k < take; ++k)
+            mQueuedFlag[mQueue[k]] = 0;
+        mQueue.erase(mQueue.begin(), mQueue.begin() + std::ptrdiff_t(take));
+        mStats.refreshed = take;
+    }
+    mStats.pending = mQueue.size();
+    if (mStats.indirectWritten > 0 || mStats.refreshed > 0) ++cache->shadingVersion;
+}
+
+} // namespace qgi

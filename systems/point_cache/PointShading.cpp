@@ -1,0 +1,127 @@
+#include "systems/point_cache/PointShading.h"
+
+#include "components/StaticMesh.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonSampling.h"
+#include "systems/photon_update/PhotonSettings.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace qgi {
+namespace {
+
+// Distinct streams of the seed for the two uses.
+constexpr std::uint64_t kShadowStream = 0x51a70d5ull;
+constexpr std::uint64_t kAoStream = 0xa0a0a0ull;
+
+} // namespace
+
+std::vector<AreaLight> findAreaLights(const Registry& registry, const Aabb& sceneBox) {
+    PhotonSettings only;
+    only.punctualLights = false;
+    only.emissiveSurfaces = true;
+    std::vector<PhotonEmitter> emitters;
+    findEmitterSources(registry, only, emitters);
+    std::vector<AreaLight> lights;
+    for (PhotonEmitter& e : emitters) {
+        if (!registry.has<StaticMesh>(e.entity)) continue;
+        prepareEmitter(registry, sceneBox, e);
+        if (!(e.power.x + e.power.y + e.power.z > 0.f)) continue;
+        AreaLight light;
+        light.entity = e.entity;
+        light.radiance = e.radiant;
+        light.triangles = std::move(e.triangles);
+        light.cdf = std::move(e.triangleCdf);
+        Aabb box;
+        double area = 0.0;
+        for (const auto& t : light.triangles) {
+            area += 0.5 * double(glm::length(glm::cross(t.edge1, t.edge2)));
+            box.extend(t.corner);
+            box.extend(t.corner + t.edge1);
+            box.extend(t.corner + t.edge2);
+        }
+        light.area = float(area);
+        light.centre = box.center();
+        light.boundRadius = 0.5f * glm::length(box.extent());
+        lights.push_back(std::move(light));
+    }
+    return lights;
+}
+
+LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
+                           const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
+                           std::uint64_t seed, std::uint32_t key) {
+    const std::uint64_t seedKey = photon::mixBits(seed ^ kShadowStream);
+    const auto u = [&](std::uint32_t dimension) {
+        return photon::hashUniform(seedKey, key, lightIndex, dimension);
+    };
+    const std::uint32_t side = std::uint32_t(std::sqrt(double(samples)));
+    const bool stratified = side * side == samples;
+    const glm::vec3 origin = photon::offsetFromSurface(x, n);
+    double total = 0.0, visible = 0.0;
+    for (std::uint32_t s = 0; s < samples; ++s) {
+        float u1 = u(2 * s), u2 = u(2 * s + 1);
+        if (stratified) {
+            u1 = std::min((float(s % side) + u1) / float(side), photon::kOneMinusEpsilon);
+            u2 = std::min((float(s / side) + u2) / float(side), photon::kOneMinusEpsilon);
+        }
+        // u1 picks the triangle by area and, rescaled inside its CDF interval, the point on it:
+        // the strata stay strata of the whole light.
+        const auto it = std::upper_bound(light.cdf.begin(), light.cdf.end(), u1);
+        const std::size_t t = std::min(std::size_t(it - light.cdf.begin()), light.cdf.size() - 1);
+        const float low = t > 0 ? light.cdf[t - 1] : 0.f;
+        const float width = light.cdf[t] - low;
+        const float v1 = width > 0.f ? std::clamp((u1 - low) / width, 0.f, photon::kOneMinusEpsilon)
+                                     : 0.f;
+        const auto& tri = light.triangles[t];
+        const glm::vec2 st = photon::sampleTriangle(v1, u2);
+        const glm::vec3 y = tri.corner + st.x * tri.edge1 + st.y * tri.edge2;
+        const glm::vec3 w = y - x;
+        const float d2 = glm::dot(w, w);
+        if (!(d2 > 0.f)) continue;
+        const float d = std::sqrt(d2);
+        const float cosX = glm::dot(n, w) / d, cosY = -glm::dot(tri.normal, w) / d;
+        if (!(cosX > 0.f && cosY > 0.f)) continue;
+        const double f = double(cosX) * double(cosY) / double(d2);
+        total += f;
+        Ray ray;
+        ray.origin = origin;
+        ray.direction = photon::offsetFromSurface(y, tri.normal) - origin;
+        ray.tnear = 0.f;
+        ray.tfar = 1.f - 1e-4f;
+        if (!scene.occluded(ray)) visible += f;
+    }
+    LightSample out;
+    out.irradiance = light.radiance * float(double(light.area) * visible / double(samples));
+    out.visibility = total > 0.0 ? float(visible / total) : 1.f;
+    return out;
+}
+
+float ambientOcclusion(const RayScene& scene, const glm::vec3& x, const glm::vec3& n,
+                       std::uint32_t rays, float distance, std::uint64_t seed, std::uint32_t key) {
+    const std::uint64_t seedKey = photon::mixBits(seed ^ kAoStream);
+    const photon::Frame frame(n);
+    const glm::vec3 origin = photon::offsetFromSurface(x, n);
+    const bool anyMobile = scene.mobileCount() > 0;
+    std::uint32_t occluded = 0;
+    for (std::uint32_t r = 0; r < rays; ++r) {
+        Ray ray;
+        ray.origin = origin;
+        ray.direction = photon::sampleCosine(frame, photon::hashUniform(seedKey, key, 0, 2 * r),
+                                             photon::hashUniform(seedKey, key, 0, 2 * r + 1));
+        ray.tfar = distance;
+        const bool hit =
+            anyMobile ? scene.occludedFiltered(
+                            ray, [&](const Hit& candidate) { return !scene.isMobile(candidate.entity); })
+                      : scene.occluded(ray);
+        occluded += hit ? 1u : 0u;
+    }
+    return float(occluded) / float(rays);
+}
+
+} // namespace qgi

@@ -1,0 +1,430 @@
+// Point cache (seed 003): construction, query, cache file, per-frame update.
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/point_cache/PointCache.h"
+#include "systems/point_cache/PointCacheFile.h"
+#include "systems/point_cache/PointCacheSettings.h"
+#include "systems/point_cache/PointCacheSystem.h"
+#include "systems/point_cache/PointSetBuilder.h"
+#include "systems/point_cache/PointShading.h"
+#include "test_meshes.h"
+#include "test_photon_scenes.h"
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+
+namespace qgi {
+namespace {
+
+using test::addMesh;
+using test::addPointLight;
+using test::boxMesh;
+using test::grey;
+using test::translation;
+
+/// A closed 4 x 2 x 4 m room (inward faces) with a 0.4 m pillar from floor to ceiling and a
+/// point light under the ceiling: the digest's "box with a pillar on a floor".
+struct PillarRoom {
+    Registry registry;
+    Entity pillar;
+    PillarRoom() {
+        addMesh(registry, boxMesh({2.f, 1.f, 2.f}, true), glm::mat4(1.f), grey(0.7f), false,
+                "room");
+        pillar = addMesh(registry, boxMesh({0.2f, 1.f, 0.2f}), glm::mat4(1.f), grey(0.7f), false,
+                         "pillar");
+        addPointLight(registry, {1.2f, 0.8f, 1.2f}, 20.f);
+        test::buildRayScene(registry);
+    }
+};
+
+PointCacheSettings roomSettings() {
+    PointCacheSettings s;
+    s.rMin = 0.03f;
+    s.rMax = 0.12f;
+    s.aoDistance = 0.3f;
+    s.particleCount = 512;
+    s.stopAfterRejections = 3000;
+    return s;
+}
+
+PointCache buildSet(Registry& registry, const PointCacheSettings& settings, PointSetStats* stats) {
+    PointCache cache;
+    cache.settings = resolvePointCacheSettings(settings, staticBounds(registry));
+    const PointSetStats st = buildPointSet(registry, registry.ctx().get<RayScene>(),
+                                           cache.settings, staticBounds(registry), cache);
+    if (stats) *stats = st;
+    return cache;
+}
+
+// ---- settings and the radius map -----------------------------------------------------------
+
+TEST(PointCacheSettings, AbsurdValuesAreRejected) {
+    const auto rejects = [](auto change) {
+        PointCacheSettings s;
+        change(s);
+        EXPECT_THROW(validate(s), Error);
+        EXPECT_THROW(PointCacheSystem{s}, Error);
+    };
+    rejects([](PointCacheSettings& s) { s.particleCount = 0; });
+    rejects([](PointCacheSettings& s) { s.rMin = -1.f; });
+    rejects([](PointCacheSettings& s) { s.rMax = std::nanf(""); });
+    rejects([](PointCacheSettings& s) { s.rMin = 2.f, s.rMax = 1.f; });
+    rejects([](PointCacheSettings& s) { s.aoRays = 0; });
+    rejects([](PointCacheSettings& s) { s.aoDistance = INFINITY; });
+    rejects([](PointCacheSettings& s) { s.searchScale = 0.5f; });
+    rejects([](PointCacheSettings& s) { s.falloffExponent = 4; });
+    rejects([](PointCacheSettings& s) { s.minNormalCosine = 2.f; });
+    rejects([](PointCacheSettings& s) { s.planeTolerance = 0.f; });
+    rejects([](PointCacheSettings& s) { s.shadowSamples = 0; });
+    rejects([](PointCacheSettings& s) { s.updateBudget = 0; });
+    rejects([](PointCacheSettings& s) { s.maxDarts = 0; });
+    rejects([](PointCacheSettings& s) { s.stopAfterRejections = 0; });
+    EXPECT_NO_THROW(validate(PointCacheSettings{}));
+    // Scene defaults need a scene.
+    EXPECT_THROW(resolvePointCacheSettings(PointCacheSettings{}, Aabb{}), Error);
+}
+
+TEST(PointCacheSettings, DefaultsScaleWithTheScene) {
+    Aabb box;
+    box.extend(glm::vec3(0.f));
+    box.extend(glm::vec3(8.f, 0.f, 6.f)); // diagonal 10 m
+    const PointCacheSettings s = resolvePointCacheSettings(PointCacheSettings{}, box);
+    EXPECT_FLOAT_EQ(s.rMax, 10.f / kRMaxPerDiagonal);
+    EXPECT_FLOAT_EQ(s.rMin, s.rMax / kRMaxPerRMin);
+    EXPECT_FLOAT_EQ(s.aoDistance, 2.f * s.rMax);
+    EXPECT_FLOAT_EQ(s.detpRadius, 3.f * s.rMax);
+}
+
+TEST(PointCacheSettings, RadiusMapIsBoundedAndMonotone) {
+    const float rMin = 0.05f, rMax = 0.4f;
+    EXPECT_EQ(spacingRadius(0.f, rMin, rMax), rMax);
+    EXPECT_EQ(spacingRadius(1.f, rMin, rMax), rMin);
+    float previous = rMax;
+    for (int i = 0; i <= 1000; ++i) {
+        const float r = spacingRadius(float(i) / 1000.f, rMin, rMax);
+        EXPECT_GE(r, rMin);
+        EXPECT_LE(r, rMax);
+        EXPECT_LE(r, previous);
+        previous = r;
+    }
+    EXPECT_EQ(spacingRadius(-3.f, rMin, rMax), rMax);
+    EXPECT_EQ(spacingRadius(7.f, rMin, rMax), rMin);
+    EXPECT_EQ(spacingRadius(std::nanf(""), rMin, rMax), rMin);
+}
+
+// ---- construction ----------------------------------------------------------------------------
+
+TEST(PointSetBuild, EveryPointKeepsItsRadiusFromEarlierPoints) {
+    PillarRoom room;
+    PointSetStats stats;
+    const PointCache cache = buildSet(room.registry, roomSettings(), &stats);
+    ASSERT_GT(cache.size(), 500u);
+    EXPECT_EQ(stats.stop, PointSetStop::Rejections);
+    for (std::size_t j = 0; j < cache.size(); ++j) {
+        EXPECT_GE(cache.radius[j], cache.settings.rMin);
+        EXPECT_LE(cache.radius[j], cache.settings.rMax);
+        for (std::size_t i = 0; i < j; ++i) {
+            const float d = glm::length(cache.position[i] - cache.position[j]);
+            ASSERT_GE(d, cache.radius[j]) << "points " << i << " and " << j;
+            ASSERT_GE(d, cache.settings.rMin);
+        }
+    }
+}
+
+TEST(PointSetBuild, TrivialTestsChangeOnlyTheAoCallCount) {
+    PillarRoom room;
+    PointCacheSettings fast = roomSettings();
+    PointCacheSettings slow = fast;
+    slow.trivialTests = false;
+    PointSetStats fastStats, slowStats;
+    const PointCache a = buildSet(room.registry, fast, &fastStats);
+    const PointCache b = buildSet(room.registry, slow, &slowStats);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(glm::vec3)), 0);
+    EXPECT_EQ(std::memcmp(a.normal.data(), b.normal.data(), a.size() * sizeof(glm::vec3)), 0);
+    EXPECT_EQ(a.radius, b.radius);
+    EXPECT_EQ(fastStats.darts, slowStats.darts);
+    EXPECT_EQ(slowStats.aoCalls, slowStats.darts - slowStats.misses);
+    EXPECT_LT(fastStats.aoCalls, slowStats.aoCalls);
+    EXPECT_GT(fastStats.trivialAccepts, 0u);
+    EXPECT_GT(fastStats.trivialRejects, 0u);
+    EXPECT_EQ(fastStats.aoCalls + fastStats.trivialAccepts + fastStats.trivialRejects +
+                  fastStats.misses,
+              fastStats.darts);
+}
+
+TEST(PointSetBuild, SameSeedSameSetOtherSeedOtherSet) {
+    PillarRoom room;
+    const PointCache a = buildSet(room.registry, roomSettings(), nullptr);
+    const PointCache b = buildSet(room.registry, roomSettings(), nullptr);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(glm::vec3)), 0);
+    PointCacheSettings other = roomSettings();
+    other.seed = 2;
+    const PointCache c = buildSet(room.registry, other, nullptr);
+    EXPECT_TRUE(c.size() != a.size() ||
+                std::memcmp(a.position.data(), c.position.data(), a.size() * sizeof(glm::vec3)));
+}
+
+TEST(PointSetBuild, DensityIsHigherAtTheCreaseThanOnTheOpenFloor) {
+    PillarRoom room;
+    const PointCache cache = buildSet(room.registry, roomSettings(), nullptr);
+    // Floor points (y = -1, facing up), by Chebyshev distance from the pillar's axis.
+    double creaseCount = 0, openCount = 0, creaseRadius = 0, openRadius = 0;
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        const glm::vec3 x = cache.position[p];
+        if (!(std::abs(x.y + 1.f) < 1e-3f && cache.normal[p].y > 0.99f)) continue;
+        const float c = std::max(std::abs(x.x), std::abs(x.z));
+        if (c > 0.2f && c <= 0.3f) {
+            ++creaseCount;
+            creaseRadius += cache.radius[p];
+        } else if (c >= 0.8f && c <= 1.3f) {
+            ++openCount;
+            openRadius += cache.radius[p];
+        }
+    }
+    const double creaseArea = 0.6 * 0.6 - 0.4 * 0.4, openArea = 2.6 * 2.6 - 1.6 * 1.6;
+    ASSERT_GT(creaseCount, 5);
+    ASSERT_GT(openCount, 50);
+    EXPECT_GT(creaseCount / creaseArea, 1.3 * openCount / openArea);
+    EXPECT_LT(creaseRadius / creaseCount, openRadius / openCount);
+}
+
+TEST(PointSetBuild, NoPointsWhereLightCannotReach) {
+    Registry registry;
+    // A lit room; inside it a hollow closed box (faces inward and outward alike: rays hit both
+    // sides) with no light inside; the room's own outside faces the dark.
+    addMesh(registry, boxMesh({2.f, 1.f, 2.f}, true), glm::mat4(1.f), grey(0.7f), false, "room");
+    const glm::vec3 boxCentre(0.8f, -0.5f, -0.8f);
+    addMesh(registry, boxMesh(glm::vec3(0.3f), true), translation(boxCentre), grey(0.7f), false,
+            "closed box");
+    addPointLight(registry, {-1.f, 0.5f, 1.f}, 20.f);
+    test::buildRayScene(registry);
+    const PointCache cache = buildSet(registry, roomSettings(), nullptr);
+    ASSERT_GT(cache.size(), 200u);
+    std::size_t onBox = 0;
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        const glm::vec3 x = cache.position[p], n = cache.normal[p];
+        // Inside the room, never outside it, and facing into it.
+        EXPECT_LE(std::abs(x.x), 2.f + 1e-4f);
+        EXPECT_LE(std::abs(x.y), 1.f + 1e-4f);
+        EXPECT_LE(std::abs(x.z), 2.f + 1e-4f);
+        const glm::vec3 local = x - boxCentre;
+        const bool onClosedBox = std::max({std::abs(local.x), std::abs(local.y),
+                                           std::abs(local.z)}) < 0.3f + 1e-4f;
+        if (onClosedBox) {
+            ++onBox;
+            EXPECT_GT(glm::dot(n, local), 0.f) << "a point inside the closed box";
+        } else {
+            EXPECT_LT(glm::dot(n, x), 0.f) << "a point on the outside of the room";
+        }
+    }
+    EXPECT_GT(onBox, 10u); // the box's outside is lit and does receive points
+
+    Registry dark;
+    addMesh(dark, boxMesh({2.f, 1.f, 2.f}, true), glm::mat4(1.f), grey(0.7f), false, "room");
+    test::buildRayScene(dark);
+    PointSetStats stats;
+    EXPECT_EQ(buildSet(dark, roomSettings(), &stats).size(), 0u);
+    EXPECT_EQ(stats.stop, PointSetStop::NoSources);
+}
+
+// ---- query -----------------------------------------------------------------------------------
+
+/// Points on the plane y = 0 facing up, a few on its underside facing down, a tilted patch.
+PointCache syntheticCache(std::uint32_t count, std::uint32_t seed, std::uint32_t falloff = 1) {
+    PointCache cache;
+    cache.settings.rMin = 0.05f;
+    cache.settings.rMax = 0.2f;
+    cache.settings.falloffExponent = falloff;
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    for (std::uint32_t i = 0; i < count; ++i) {
+        const float kind = u(rng);
+        glm::vec3 p(4.f * u(rng) - 2.f, 0.f, 4.f * u(rng) - 2.f), n(0.f, 1.f, 0.f);
+        if (kind < 0.15f) {
+            p.y = -0.02f; // the underside of a 2 cm slab
+            n = glm::vec3(0.f, -1.f, 0.f);
+        } else if (kind < 0.3f) {
+            n = glm::normalize(glm::vec3(u(rng) - 0.5f, 1.f, u(rng) - 0.5f));
+        }
+        cache.position.push_back(p);
+        cache.normal.push_back(n);
+        cache.radius.push_back(0.05f + 0.15f * u(rng));
+        cache.dart.push_back(i);
+        cache.ao.push_back(u(rng));
+        cache.direct.push_back(glm::vec3(u(rng), 2.f * u(rng), 3.f * u(rng)));
+        cache.indirect.push_back(glm::vec3(u(rng)));
+    }
+    cache.buildGrid();
+    return cache;
+}
+
+struct Query {
+    glm::vec3 x, n;
+};
+
+std::vector<Query> randomQueries(std::uint32_t count, std::uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    std::vector<Query> out;
+    for (std::uint32_t i = 0; i < count; ++i) {
+        const glm::vec3 x(5.f * u(rng) - 2.5f, 0.3f * u(rng) - 0.15f, 5.f * u(rng) - 2.5f);
+        const float k = u(rng);
+        const glm::vec3 n = k < 0.2f   ? glm::vec3(0.f, -1.f, 0.f)
+                            : k < 0.4f ? glm::normalize(glm::vec3(u(rng) - .5f, u(rng) - .5f,
+                                                                  u(rng) - .5f))
+                                       : glm::vec3(0.f, 1.f, 0.f);
+        out.push_back({x, n});
+    }
+    return out;
+}
+
+/// The in-range rule, written out independently of PointGrid.
+std::vector<std::uint32_t> bruteForce(const PointCache& c, const Query& q) {
+    std::vector<std::uint32_t> out;
+    for (std::uint32_t p = 0; p < c.size(); ++p) {
+        const float R = c.settings.searchScale * c.radius[p];
+        const glm::vec3 d = q.x - c.position[p];
+        if (glm::length(d) < R && glm::dot(c.normal[p], q.n) >= c.settings.minNormalCosine &&
+            std::abs(glm::dot(c.normal[p], d)) <= c.settings.planeTolerance * R)
+            out.push_back(p);
+    }
+    return out;
+}
+
+TEST(PointCacheQuery, GridFindsExactlyWhatBruteForceFinds) {
+    for (const float cell : {0.f, 0.07f, 0.9f}) {
+        PointCache cache = syntheticCache(3000, 7);
+        cache.settings.gridCellSize = cell;
+        cache.buildGrid();
+        std::size_t nonEmpty = 0;
+        for (const Query& q : randomQueries(3000, 11)) {
+            std::vector<std::uint32_t> found;
+            cache.grid.forEachInRange(q.x, q.n, [&](std::uint32_t p, float) { found.push_back(p); });
+            const std::vector<std::uint32_t> expected = bruteForce(cache, q);
+            ASSERT_EQ(found, expected) << "cell " << cell;
+            nonEmpty += expected.empty() ? 0 : 1;
+        }
+        EXPECT_GT(nonEmpty, 1000u);
+    }
+}
+
+TEST(PointCacheQuery, BlendIsAConvexCombinationAndReproducesAConstant) {
+    for (const std::uint32_t k : {1u, 2u, 3u}) {
+        PointCache cache = syntheticCache(2000, 3, k);
+        PointCache constant = cache;
+        std::fill(constant.direct.begin(), constant.direct.end(), glm::vec3(0.3f, 1.7f, 42.f));
+        std::fill(constant.ao.begin(), constant.ao.end(), 0.25f);
+        for (const Query& q : randomQueries(1000, 5)) {
+            const PointCacheSample s = cache.sample(q.x, q.n);
+            const std::vector<std::uint32_t> in = bruteForce(cache, q);
+            std::size_t positive = 0;
+            glm::vec3 low(INFINITY), high(-INFINITY);
+            for (const std::uint32_t p : in) {
+                if (cache.weight(glm::length(q.x - cache.position[p]), cache.searchRadius(p)) > 0.f)
+                    ++positive;
+                low = glm::min(low, cache.direct[p]);
+                high = glm::max(high, cache.direct[p]);
+            }
+            ASSERT_EQ(s.count, positive);
+            if (s.count == 0) continue;
+            for (int c = 0; c < 3; ++c) {
+                EXPECT_GE(s.direct[c], low[c] * (1.f - 1e-6f));
+                EXPECT_LE(s.direct[c], high[c] * (1.f + 1e-6f));
+            }
+            const PointCacheSample sc = constant.sample(q.x, q.n);
+            EXPECT_NEAR(sc.direct.x, 0.3f, 0.3f * 1e-6f);
+            EXPECT_NEAR(sc.direct.y, 1.7f, 1.7f * 1e-6f);
+            EXPECT_NEAR(sc.direct.z, 42.f, 42.f * 1e-6f);
+            EXPECT_NEAR(sc.ao, 0.25f, 1e-7f);
+        }
+    }
+}
+
+TEST(PointCacheQuery, WeightsArePositiveAndStrictlyDecreasing) {
+    PointCache cache;
+    for (const std::uint32_t k : {1u, 2u, 3u}) {
+        cache.settings.falloffExponent = k;
+        float previous = cache.weight(0.f, 1.f);
+        EXPECT_EQ(previous, 1.f);
+        for (int i = 1; i < 100; ++i) {
+            const float w = cache.weight(float(i) / 100.f, 1.f);
+            EXPECT_GT(w, 0.f);
+            EXPECT_LT(w, previous);
+            previous = w;
+        }
+        EXPECT_EQ(cache.weight(1.f, 1.f), 0.f);
+        EXPECT_EQ(cache.weight(2.f, 1.f), 0.f);
+    }
+}
+
+TEST(PointCacheQuery, SinglePointReturnsItsValueAndNothingBeyondItsRadius) {
+    PointCache cache;
+    cache.position = {glm::vec3(1.f, 2.f, 3.f)};
+    cache.normal = {glm::vec3(0.f, 0.f, 1.f)};
+    cache.radius = {0.1f};
+    cache.dart = {0};
+    cache.ao = {0.4f};
+    cache.direct = {glm::vec3(5.f, 6.f, 7.f)};
+    cache.indirect = {glm::vec3(0.5f)};
+    cache.buildGrid();
+    const glm::vec3 n(0.f, 0.f, 1.f);
+    for (const float d : {0.f, 0.05f, 0.15f, 0.1999f}) {
+        const PointCacheSample s = cache.sample(glm::vec3(1.f + d, 2.f, 3.f), n);
+        ASSERT_EQ(s.count, 1u) << d;
+        EXPECT_FLOAT_EQ(s.direct.x, 5.f);
+        EXPECT_FLOAT_EQ(s.direct.z, 7.f);
+        EXPECT_FLOAT_EQ(s.indirect.y, 0.5f);
+        EXPECT_FLOAT_EQ(s.ao, 0.4f);
+    }
+    EXPECT_EQ(cache.sample(glm::vec3(1.2f, 2.f, 3.f), n).count, 0u);
+    // Facing away (the other side of a thin wall) and behind the plane do not count.
+    EXPECT_EQ(cache.sample(glm::vec3(1.f, 2.f, 3.f), -n).count, 0u);
+    EXPECT_EQ(cache.sample(glm::vec3(1.f, 2.f, 3.f - 0.15f), n).count, 0u);
+}
+
+TEST(PointCacheQuery, EmptyNeighbourhoodFallsBackWithoutNan) {
+    const PointCache cache = syntheticCache(200, 1);
+    PointCache empty;
+    empty.buildGrid();
+    const glm::vec3 up(0.f, 1.f, 0.f);
+    for (const PointCacheSample& s :
+         {cache.sample(glm::vec3(50.f, 0.f, 50.f), up), empty.sample(glm::vec3(0.f), up),
+          cache.sample(glm::vec3(std::nanf("")), up), cache.sample(glm::vec3(0.f), glm::vec3(NAN)),
+          cache.sample(glm::vec3(INFINITY, 0.f, 0.f), up)}) {
+        EXPECT_EQ(s.count, 0u);
+        EXPECT_EQ(s.direct, glm::vec3(0.f));
+        EXPECT_EQ(s.indirect, glm::vec3(0.f));
+        EXPECT_EQ(s.ao, 0.f);
+    }
+}
+
+TEST(PointCacheQuery, IdenticalQueriesGiveIdenticalResults) {
+    const PointCache a = syntheticCache(2000, 9);
+    const PointCache b = syntheticCache(2000, 9);
+    ASSERT_TRUE(std::equal(a.grid.cellPoints().begin(), a.grid.cellPoints().end(),
+                           b.grid.cellPoints().begin(), b.grid.cellPoints().end()));
+    for (const Query& q : randomQueries(500, 2)) {
+        const PointCacheSample s = a.sample(q.x, q.n), t = b.sample(q.x, q.n), u = a.sample(q.x, q.n);
+        EXPECT_EQ(std::memcmp(&s, &t, sizeof s), 0);
+        EXPECT_EQ(std::memcmp(&s, &u, sizeof s), 0);
+    }
+}
+
+} // namespace
+} // namespace qgi
