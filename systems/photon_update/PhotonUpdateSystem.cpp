@@ -302,7 +302,8 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     store.paths.clear();
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
-        store.lights.push_back({e.entity, e.power, e.photonCount});
+        store.lights.push_back(
+            {e.entity, e.power, e.photonCount, e.kind != EmitterKind::Surface});
         store.emittedPower += e.power;
         store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
     }
