@@ -55,19 +55,22 @@ DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSett
 DetpIrradianceSystem::~DetpIrradianceSystem() = default;
 
 void DetpIrradianceSystem::build(Registry& registry) {
+    RayScene* rayScene = registry.ctx().find<RayScene>();
+    if (!rayScene) fail("DETP: the registry has no RayScene (its Embree device hosts the discs)");
+
+    ReceiverSet receivers;
+    receivers.build(registry);
     float radius = mSettings.discRadius;
     if (radius == 0.f) {
         const SceneInfo* info = registry.ctx().find<SceneInfo>();
         if (!info)
             fail("DETP: DetpSettings.discRadius is 0 (scene default) but the registry has no "
                  "SceneInfo to scale it from");
-        radius = defaultDiscRadius(*info);
+        double area = 0.0;
+        for (const float a : receivers.triangleAreas())
+            area += double(a);
+        radius = defaultDiscRadius(*info, area, mSettings.photonCount);
     }
-    RayScene* rayScene = registry.ctx().find<RayScene>();
-    if (!rayScene) fail("DETP: the registry has no RayScene (its Embree device hosts the discs)");
-
-    ReceiverSet receivers;
-    receivers.build(registry);
     auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
     const std::uint32_t staticCount = receivers.staticVertexCount();
     staticDiscs->build(receivers.positions().first(staticCount),

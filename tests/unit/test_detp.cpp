@@ -699,6 +699,13 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     info.bounds.extend(glm::vec3(3.f, 4.f, 0.f));
     EXPECT_FLOAT_EQ(defaultDiscRadius(info), 0.05f);
     EXPECT_THROW(defaultDiscRadius(SceneInfo{}), Error);
+    // Scarce photons widen the disc to about 64 landings of evenly spread photons:
+    // 100 m^2 and 10k photons give sqrt(6400 / (pi 10^4)) = 0.451 m.
+    EXPECT_NEAR(defaultDiscRadius(info, 100.0, 10'000), std::sqrt(0.64 / kPi), 1e-6);
+    // Plenty keep the mesh rule; no area or no photons leave it alone.
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 100.0, 100'000'000), 0.05f);
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 0.0, 10'000), 0.05f);
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 100.0, 0), 0.05f);
 
     Registry registry;
     addResources(registry);
