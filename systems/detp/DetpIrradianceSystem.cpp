@@ -13,6 +13,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -313,6 +314,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         return;
     }
 
+    const auto start = std::chrono::steady_clock::now();
     mTouched.clear();
     if (!delta.paths.empty()) {
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
@@ -345,6 +347,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);
     mStats.verticesWritten = mTouched.size();
+    const auto moved = std::chrono::steady_clock::now();
+    mStats.deltaMs = std::chrono::duration<double, std::milli>(moved - start).count();
 
     for (const std::uint32_t r : mMoved) {
         estimateMobile(registry, store, r);
@@ -352,6 +356,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mStats.verticesWritten += receivers[r].vertexCount;
     }
     mStats.movedMobiles = mMoved.size();
+    mStats.mobileMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - moved).count();
 }
 
 // ---- impact count -------------------------------------------------------------------------

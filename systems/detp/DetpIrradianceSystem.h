@@ -77,6 +77,8 @@ public:
         std::size_t candidateSegments = 0; ///< their segments that reach the mobile, traced
         std::size_t crossings = 0;         ///< (segment, disc) pairs applied
         std::size_t verticesWritten = 0;
+        double deltaMs = 0;  ///< wall-clock: the delta applied to static and unmoved vertices
+        double mobileMs = 0; ///< wall-clock: moved mobiles re-estimated in full
     };
 
     /// Throws qgi::Error for settings out of range (see validate()).

@@ -208,7 +208,8 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute);
-    double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0, detp = 0;
+    double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
+           detp = 0, detpDelta = 0, detpMobile = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
@@ -219,6 +220,8 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
         find += stats.findMs;
         trace += stats.traceMs;
         grid += stats.gridMs;
+        detpDelta += w.irradiance->lastFrame().deltaMs;
+        detpMobile += w.irradiance->lastFrame().mobileMs;
     }
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
@@ -227,6 +230,8 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
     state.counters["trace ms"] = trace / frames;
     state.counters["grid ms"] = grid / frames;
     state.counters["detp ms"] = detp / frames;
+    state.counters["detp delta ms"] = detpDelta / frames;
+    state.counters["detp mobiles ms"] = detpMobile / frames;
 }
 
 } // namespace

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <random>
@@ -69,9 +70,11 @@ void moveAll(Registry& registry, PhotonUpdateSystem& system,
 }
 
 /// Brute force over every stored segment: the first segment of each path that hit one of
-/// `moved` (at its old pose, as recorded) or crosses it at its new pose; -1 when none.
+/// `moved` (at its old pose, as recorded) or crosses it at its new pose, and that `landed`
+/// (when given) does not excuse; -1 when none.
 std::vector<int> bruteForceFirstAffected(const PhotonStore& before, const RayScene& scene,
-                                         const std::vector<std::pair<Entity, glm::mat4>>& moved) {
+                                         const std::vector<std::pair<Entity, glm::mat4>>& moved,
+                                         const std::function<bool(std::size_t)>& landed = {}) {
     std::vector<int> first(before.pathCount(), -1);
     for (std::size_t p = 0; p < before.pathCount(); ++p) {
         const PhotonPath& path = before.paths[p];
@@ -80,7 +83,8 @@ std::vector<int> bruteForceFirstAffected(const PhotonStore& before, const RaySce
             const Ray ray{before.segments.origin[s], 0.f, before.segments.direction[s],
                           before.segments.length[s]};
             for (const auto& [e, pose] : moved)
-                if (before.segments.hitEntity[s] == e || scene.intersectMobile(e, pose, ray))
+                if ((before.segments.hitEntity[s] == e || scene.intersectMobile(e, pose, ray)) &&
+                    !(landed && landed(s)))
                     first[p] = k;
         }
     }
@@ -315,38 +319,24 @@ TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
     EXPECT_EQ(storeOf(baseline).generation, generation + 10);
 }
 
-/// Brute force of the landing rule (PhotonSettings::reuseLandedPaths) for one mobile that only
-/// translated to `pose`: per path, the first affected segment (as bruteForceFirstAffected) that
-/// does not land where it did when cast again through the whole scene: same mobile, same
-/// distance within `tolerance`, a triangle in the same plane (normals from the test's mesh).
-std::vector<int> bruteForceFirstUnlanded(const PhotonStore& before, const RayScene& scene,
-                                         Entity mobile, const glm::mat4& pose, const Mesh& mesh,
-                                         float tolerance) {
+/// The landing rule (PhotonSettings::reuseLandedPaths), by brute force, for a segment that hit
+/// `mobile` (which only translated): cast again through the whole scene, it lands on the same
+/// mobile at the same distance within `tolerance`, on a triangle in the same plane (normals
+/// from the test's own mesh).
+bool landsAgain(const PhotonStore& before, const RayScene& scene, std::size_t s, Entity mobile,
+                const Mesh& mesh, float tolerance) {
     const auto normal = [&](std::uint32_t t) {
         const glm::vec3 a = mesh.positions[mesh.indices[3 * t]];
         return glm::normalize(glm::cross(mesh.positions[mesh.indices[3 * t + 1]] - a,
                                          mesh.positions[mesh.indices[3 * t + 2]] - a));
     };
-    std::vector<int> first(before.pathCount(), -1);
-    for (std::size_t p = 0; p < before.pathCount(); ++p) {
-        const PhotonPath& path = before.paths[p];
-        for (int k = 0; k < path.count && first[p] < 0; ++k) {
-            const std::size_t s = path.first + std::size_t(k);
-            const Ray ray{before.segments.origin[s], 0.f, before.segments.direction[s],
-                          before.segments.length[s]};
-            const bool hitIt = before.segments.hitEntity[s] == mobile;
-            if (!hitIt && !scene.intersectMobile(mobile, pose, ray)) continue;
-            const std::optional<Hit> again = scene.intersect(
-                Ray{ray.origin, 0.f, ray.direction, std::numeric_limits<float>::infinity()});
-            const bool landed =
-                hitIt && again && again->entity == mobile &&
-                std::abs(again->t - before.segments.length[s]) <= tolerance &&
-                glm::length(normal(again->primitive) - normal(before.segments.hitPrimitive[s])) <
-                    1e-5f;
-            if (!landed) first[p] = k;
-        }
-    }
-    return first;
+    if (before.segments.hitEntity[s] != mobile) return false;
+    const std::optional<Hit> again = scene.intersect(Ray{before.segments.origin[s], 0.f,
+                                                         before.segments.direction[s],
+                                                         std::numeric_limits<float>::infinity()});
+    return again && again->entity == mobile &&
+           std::abs(again->t - before.segments.length[s]) <= tolerance &&
+           glm::length(normal(again->primitive) - normal(before.segments.hitPrimitive[s])) < 1e-5f;
 }
 
 TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
@@ -367,8 +357,11 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
         pose = translation(kCubeRest + glm::vec3(0.013f * float(frame), 0.f, -0.007f * float(frame)));
         const PhotonStore before = storeOf(registry);
         test::moveAndUpdate(registry, system, room.cube, pose, frame);
-        const std::vector<int> expected = bruteForceFirstUnlanded(
-            before, scene, room.cube, pose, registry.get<Mesh>(room.cube), tolerance);
+        const Mesh& mesh = registry.get<Mesh>(room.cube);
+        const std::vector<int> expected =
+            bruteForceFirstAffected(before, scene, {{room.cube, pose}}, [&](std::size_t s) {
+                return landsAgain(before, scene, s, room.cube, mesh, tolerance);
+            });
         expectExactDelta(before, storeOf(registry), deltaOf(registry), expected, room.cube);
         if (HasFatalFailure()) return;
         landed += system.lastFrame().landedPaths;
