@@ -134,7 +134,12 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
 void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments& segments,
                                         std::span<const std::uint32_t> indices, double sign) {
     if (indices.empty() || cache.size() == 0) return;
-    mDiscs->collectCrossings(segments, indices, /*skipDirect=*/true, mCrossings);
+    // Indirect light only: segments that leave a light (bounce 0) are the direct light, which
+    // the stored visibility covers.
+    mIndirect.clear();
+    for (const std::uint32_t s : indices)
+        if (segments.bounce[s] != 0) mIndirect.push_back(s);
+    mDiscs->collectCrossings(segments, mIndirect, mCrossings);
     for (const DiscCrossing& c : mCrossings) {
         mPowerSum[c.disc] += sign * glm::dvec3(segments.power[c.segment]);
         if (!mIsTouched[c.disc]) {

@@ -106,6 +106,7 @@ private:
     std::vector<std::uint32_t> mQueue;
 
     std::vector<std::uint32_t> mSegments;
+    std::vector<std::uint32_t> mIndirect; ///< scratch: the segments estimateIndirect counts
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;
     std::vector<std::uint8_t> mIsTouched;

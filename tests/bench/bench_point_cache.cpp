@@ -63,6 +63,8 @@ void BM_Build(benchmark::State& state) {
     state.counters["darts"] = double(s.darts);
     state.counters["aoCalls"] = double(s.aoCalls);
     state.counters["sources"] = double(s.sources);
+    // 0: consecutive rejections, 1: dart budget, 2: point budget (PointSetStop).
+    state.counters["stop"] = double(int(s.stop));
     state.counters["gridEntries"] = double(w.registry.ctx().get<PointCache>().grid.entryCount());
 }
 BENCHMARK(BM_Build)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();

@@ -404,6 +404,7 @@ TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
     PointCacheSettings settings;
     settings.rMin = 0.08f;
     settings.rMax = 0.3f;
+    settings.detpRadius = 0.3f; // discs small enough that some miss every delta segment
     settings.particleCount = 512;
     settings.stopAfterRejections = 1000;
     PointCacheSystem system(settings);

@@ -1,0 +1,114 @@
+// The fragment shader's point-cache blend (shaders/common/pointcache.glsl) against the CPU
+// query (PointCache::sample) it mirrors, pixel by pixel (runs under `xvfb-run -a`).
+#include "components/Camera.h"
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/PointCacheShaded.h"
+#include "components/VertexIrradiance.h"
+#include "components/WorldTransform.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/render/GlWindow.h"
+#include "systems/point_cache/PointCache.h"
+#include "systems/render/RenderSystem.h"
+
+#include <glm/gtc/constants.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <memory>
+#include <random>
+
+namespace qgi {
+namespace {
+
+constexpr int kSize = 96;
+constexpr float kAlbedo = 0.5f, kHeight = 3.f, kFov = 0.9f;
+
+TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
+    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
+        GTEST_SKIP() << "no display: run the GL tests under 'xvfb-run -a'";
+    WindowSettings window;
+    window.width = kSize;
+    window.height = kSize;
+    window.headless = true;
+    window.title = "qgi test_render_point_cache";
+    GlWindow context(window);
+    {
+        Registry world;
+        // A 4 x 4 m floor at y = 0 facing up, no lights: only the cache lights it.
+        const Entity floor = world.create();
+        Mesh& mesh = world.emplace<Mesh>(floor);
+        mesh.positions = {{-2.f, 0.f, 2.f}, {2.f, 0.f, 2.f}, {2.f, 0.f, -2.f}, {-2.f, 0.f, -2.f}};
+        mesh.normals.assign(4, glm::vec3(0.f, 1.f, 0.f));
+        mesh.indices = {0, 1, 2, 0, 2, 3};
+        world.emplace<WorldTransform>(floor);
+        Material material;
+        material.baseColor = glm::vec3(kAlbedo);
+        world.emplace<Material>(floor, material);
+        world.emplace<VertexIrradiance>(floor).irradiance.assign(4, glm::vec3(0.f));
+        world.emplace<PointCacheShaded>(floor);
+
+        // The camera kHeight above the origin looking straight down (local -Z to world -Y).
+        const Entity camera = world.create();
+        Camera& cam = world.emplace<Camera>(camera);
+        cam.yfov = kFov;
+        cam.active = true;
+        const glm::mat4 pose =
+            glm::rotate(glm::translate(glm::mat4(1.f), {0.f, kHeight, 0.f}),
+                        -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f));
+        world.emplace<WorldTransform>(camera, WorldTransform{pose});
+
+        // Random points on the floor (a gap on the left half-plane x < -1.2 shows the fallback).
+        PointCache& cache = world.ctx().emplace<PointCache>();
+        std::mt19937 rng(3);
+        std::uniform_real_distribution<float> u(0.f, 1.f);
+        for (int i = 0; i < 400; ++i) {
+            const glm::vec3 p(-1.0f + 3.f * u(rng), 0.f, -2.f + 4.f * u(rng));
+            cache.position.push_back(p);
+            cache.normal.push_back({0.f, 1.f, 0.f});
+            cache.radius.push_back(0.08f + 0.12f * u(rng));
+            cache.dart.push_back(std::uint32_t(i));
+            cache.ao.push_back(u(rng));
+            cache.direct.push_back({2.f * u(rng), 2.f * u(rng), 2.f * u(rng)});
+            cache.indirect.push_back(glm::vec3(0.5f * u(rng)));
+        }
+        cache.buildGrid();
+
+        RenderSettings settings;
+        settings.width = kSize;
+        settings.height = kSize;
+        settings.mode = ShadingMode::Hybrid;
+        RenderSystem renderer(settings);
+        renderer.update(world, FrameContext{});
+        const ImageF hdr = renderer.readHdr();
+
+        const float tanHalf = std::tan(0.5f * kFov);
+        int cached = 0, fallback = 0;
+        for (int y = 0; y < kSize; ++y)
+            for (int x = 0; x < kSize; ++x) {
+                // Pixel centre -> camera ray -> floor (image rows top first).
+                const float ndcX = 2.f * (float(x) + 0.5f) / kSize - 1.f;
+                const float ndcY = 1.f - 2.f * (float(y) + 0.5f) / kSize;
+                const glm::vec3 dir(pose * glm::vec4(ndcX * tanHalf, ndcY * tanHalf, -1.f, 0.f));
+                const glm::vec3 at = glm::vec3(pose[3]) + (kHeight / -dir.y) * dir;
+                if (std::abs(at.x) > 1.98f || std::abs(at.z) > 1.98f) continue;
+                const PointCacheSample s = cache.sample(at, {0.f, 1.f, 0.f});
+                const glm::vec3 expected = kAlbedo / glm::pi<float>() * s.irradiance();
+                (s.count > 0 ? cached : fallback) += 1;
+                const float* actual = hdr.pixel(x, y);
+                for (int c = 0; c < 3; ++c)
+                    // float on the GPU against double on the CPU, and a pixel centre that may
+                    // differ from the rasterizer's by float rounding: the blend is continuous
+                    // (weights vanish at R_p), so 1e-3 of the brightest value bounds both.
+                    ASSERT_NEAR(actual[c], expected[c], 1e-3f * 2.5f * kAlbedo / glm::pi<float>())
+                        << "pixel " << x << ", " << y << " channel " << c << " points " << s.count;
+            }
+        EXPECT_GT(cached, 3000);
+        EXPECT_GT(fallback, 100);
+    }
+}
+
+} // namespace
+} // namespace qgi
