@@ -208,16 +208,16 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
     state.counters["candidates/frame"] = candidates / frames;
     state.counters["segments/frame"] = segments / frames;
     state.counters["paths"] = double(w.store().pathCount());
-    state.counters["store MiB"] =
+    state.counters["store_MiB"] =
         double(w.store().segments.size() * PhotonSegments::kBytesPerSegment) / (1 << 20);
-    state.counters["grid MiB"] =
+    state.counters["grid_MiB"] =
         double(w.registry.ctx().get<PhotonPathGrid>().memoryBytes()) / (1 << 20);
 }
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
-           detp = 0, detpDelta = 0, detpMobile = 0;
+           detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
@@ -230,16 +230,20 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
         grid += stats.gridMs;
         detpDelta += w.irradiance->lastFrame().deltaMs;
         detpMobile += w.irradiance->lastFrame().mobileMs;
+        mobilePaths += double(w.irradiance->lastFrame().candidatePaths);
+        mobileSegments += double(w.irradiance->lastFrame().candidateSegments);
     }
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
     state.counters["landed/frame"] = landed / frames;
-    state.counters["find ms"] = find / frames;
-    state.counters["trace ms"] = trace / frames;
-    state.counters["grid ms"] = grid / frames;
-    state.counters["detp ms"] = detp / frames;
-    state.counters["detp delta ms"] = detpDelta / frames;
-    state.counters["detp mobiles ms"] = detpMobile / frames;
+    state.counters["find_ms"] = find / frames;
+    state.counters["trace_ms"] = trace / frames;
+    state.counters["grid_ms"] = grid / frames;
+    state.counters["detp_ms"] = detp / frames;
+    state.counters["detp_delta_ms"] = detpDelta / frames;
+    state.counters["detp_mobiles_ms"] = detpMobile / frames;
+    state.counters["detp_mobile_paths"] = mobilePaths / frames;
+    state.counters["detp_mobile_segments"] = mobileSegments / frames;
 }
 
 } // namespace
