@@ -3,6 +3,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
+#include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonPathGrid.h"
@@ -13,10 +14,10 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 namespace qgi {
 namespace {
@@ -314,7 +315,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         return;
     }
 
-    const auto start = std::chrono::steady_clock::now();
+    FrameProfiler* profiler = registry.ctx().find<FrameProfiler>();
+    std::optional<StageTimer> timer(std::in_place, profiler, "delta", mStats.deltaMs);
     mTouched.clear();
     if (!delta.paths.empty()) {
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
@@ -347,8 +349,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);
     mStats.verticesWritten = mTouched.size();
-    const auto moved = std::chrono::steady_clock::now();
-    mStats.deltaMs = std::chrono::duration<double, std::milli>(moved - start).count();
+    timer.emplace(profiler, "mobiles", mStats.mobileMs);
 
     for (const std::uint32_t r : mMoved) {
         estimateMobile(registry, store, r);
@@ -356,8 +357,6 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mStats.verticesWritten += receivers[r].vertexCount;
     }
     mStats.movedMobiles = mMoved.size();
-    mStats.mobileMs =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - moved).count();
 }
 
 // ---- impact count -------------------------------------------------------------------------
