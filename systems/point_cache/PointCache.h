@@ -12,10 +12,10 @@ namespace qgi {
 
 /// What the cache gives a shaded position: the blend of the points in range.
 struct PointCacheSample {
-    std::uint32_t count = 0;    ///< points that took part; 0: no point in range (fallback)
-    glm::vec3 direct{0.f};      ///< W/m^2: area lights with soft shadows
-    glm::vec3 indirect{0.f};    ///< W/m^2: photon light after one or more bounces (DETP)
-    float ao = 0.f;             ///< ambient occlusion, 0 open .. 1 fully occluded
+    std::uint32_t count = 0; ///< points that took part; 0: no point in range (fallback)
+    glm::vec3 direct{0.f};   ///< W/m^2: area lights with soft shadows
+    glm::vec3 indirect{0.f}; ///< W/m^2: photon light after one or more bounces (DETP)
+    float ao = 0.f;          ///< ambient occlusion, 0 open .. 1 fully occluded
     glm::vec3 irradiance() const { return direct + indirect; }
 };
 

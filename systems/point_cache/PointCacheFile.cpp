@@ -50,7 +50,9 @@ void put(std::vector<char>& out, const void* data, std::size_t size) {
     const char* p = static_cast<const char*>(data);
     out.insert(out.end(), p, p + size);
 }
-template <typename T> void putValue(std::vector<char>& out, const T& v) { put(out, &v, sizeof v); }
+template <typename T> void putValue(std::vector<char>& out, const T& v) {
+    put(out, &v, sizeof v);
+}
 template <typename T> void putArray(std::vector<char>& out, const std::vector<T>& v) {
     if (!v.empty()) put(out, v.data(), v.size() * sizeof(T));
 }
@@ -87,10 +89,10 @@ private:
 std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& s) {
     Fnv h;
     h.value(kPointCacheFileVersion);
-    for (const auto v : {s.seed, std::uint64_t(s.particleCount), std::uint64_t(s.particleBounces),
-                         std::uint64_t(s.stopAfterRejections), s.maxDarts,
-                         std::uint64_t(s.maxPoints), std::uint64_t(s.aoRays),
-                         std::uint64_t(s.trivialTests), std::uint64_t(s.shadowSamples)})
+    for (const auto v :
+         {s.seed, std::uint64_t(s.particleCount), std::uint64_t(s.particleBounces),
+          std::uint64_t(s.stopAfterRejections), s.maxDarts, std::uint64_t(s.maxPoints),
+          std::uint64_t(s.aoRays), std::uint64_t(s.trivialTests), std::uint64_t(s.shadowSamples)})
         h.value(v);
     for (const float v : {s.rMin, s.rMax, s.aoDistance})
         h.value(v);
@@ -160,7 +162,8 @@ void writePointCacheFile(const std::string& path, std::uint64_t key, const Point
 void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& cache) {
     std::ifstream file(path, std::ios::binary);
     if (!file) fail("point cache file '", path, "' cannot be opened");
-    std::vector<char> data((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+    std::vector<char> data((std::istreambuf_iterator<char>(file)),
+                           std::istreambuf_iterator<char>());
     if (data.size() < sizeof kMagic + 36 + sizeof(std::uint64_t))
         fail("point cache file '", path, "' is truncated (", data.size(), " bytes)");
     if (std::memcmp(data.data(), kMagic, sizeof kMagic) != 0)

@@ -67,8 +67,7 @@ PointCacheSettings resolvePointCacheSettings(const PointCacheSettings& settings,
         if (s.rMax == 0.f) s.rMax = std::max(s.rMin, diagonal / kRMaxPerDiagonal);
         if (s.rMin == 0.f) s.rMin = s.rMax / kRMaxPerRMin;
     }
-    if (s.rMin > s.rMax)
-        fail("PointCacheSettings: rMin = ", s.rMin, " exceeds rMax = ", s.rMax);
+    if (s.rMin > s.rMax) fail("PointCacheSettings: rMin = ", s.rMin, " exceeds rMax = ", s.rMax);
     if (s.aoDistance == 0.f) s.aoDistance = 2.f * s.rMax;
     if (s.detpRadius == 0.f) s.detpRadius = 3.f * s.rMax;
     return s;

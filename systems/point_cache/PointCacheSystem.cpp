@@ -9,8 +9,8 @@
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/point_cache/PointCacheFile.h"
 
-#include <glm/gtc/constants.hpp>
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
 
@@ -31,8 +31,8 @@ float distanceToSegment(const glm::vec3& c, const glm::vec3& a, const glm::vec3&
 }
 
 float maxScale(const glm::mat4& m) {
-    return std::max({glm::length(glm::vec3(m[0])), glm::length(glm::vec3(m[1])),
-                     glm::length(glm::vec3(m[2]))});
+    return std::max(
+        {glm::length(glm::vec3(m[0])), glm::length(glm::vec3(m[1])), glm::length(glm::vec3(m[2]))});
 }
 
 } // namespace
@@ -116,19 +116,19 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
     const std::size_t lights = mLights.size();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 16),
                       [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t k = range.begin(); k != range.end(); ++k) {
-            const std::uint32_t p = points[k];
-            glm::vec3 sum(0.f);
-            for (std::size_t l = 0; l < lights; ++l) {
-                const LightSample ls =
-                    shadeAreaLight(scene, mLights[l], std::uint32_t(l), cache.position[p],
-                                   cache.normal[p], s.shadowSamples, s.seed, cache.dart[p]);
-                sum += ls.irradiance;
-                cache.visibility[std::size_t(p) * lights + l] = ls.visibility;
-            }
-            cache.direct[p] = sum;
-        }
-    });
+                          for (std::size_t k = range.begin(); k != range.end(); ++k) {
+                              const std::uint32_t p = points[k];
+                              glm::vec3 sum(0.f);
+                              for (std::size_t l = 0; l < lights; ++l) {
+                                  const LightSample ls = shadeAreaLight(
+                                      scene, mLights[l], std::uint32_t(l), cache.position[p],
+                                      cache.normal[p], s.shadowSamples, s.seed, cache.dart[p]);
+                                  sum += ls.irradiance;
+                                  cache.visibility[std::size_t(p) * lights + l] = ls.visibility;
+                              }
+                              cache.direct[p] = sum;
+                          }
+                      });
 }
 
 void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments& segments,
@@ -174,24 +174,27 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
     // Per point: the distance to the nearest moved mobile when a moved mobile (old or new
     // pose) may stand between it and a light; +inf otherwise. Parallel, then queued in order.
     std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cache.size(), 256),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t p = range.begin(); p != range.end(); ++p) {
-            const glm::vec3 x = cache.position[p];
-            for (const Move& m : moves)
-                for (const AreaLight& light : mLights) {
-                    const bool before = distanceToSegment(m.before, x, light.centre) <
-                                        m.radiusBefore + light.boundRadius;
-                    const bool after = distanceToSegment(m.after, x, light.centre) <
-                                       m.radiusAfter + light.boundRadius;
-                    if (before || after) {
-                        key[p] = std::min({key[p], glm::length(m.after - x),
-                                           glm::length(m.before - x)});
-                        break;
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, cache.size(), 256),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+            for (std::size_t p = range.begin(); p != range.end(); ++p) {
+                const glm::vec3 x = cache.position[p], n = cache.normal[p];
+                for (const Move& m : moves)
+                    for (const AreaLight& light : mLights) {
+                        // A light wholly below the point's horizon adds nothing, mobile or not.
+                        if (glm::dot(n, light.centre - x) < -light.boundRadius) continue;
+                        const bool before = distanceToSegment(m.before, x, light.centre) <
+                                            m.radiusBefore + light.boundRadius;
+                        const bool after = distanceToSegment(m.after, x, light.centre) <
+                                           m.radiusAfter + light.boundRadius;
+                        if (before || after) {
+                            key[p] = std::min(
+                                {key[p], glm::length(m.after - x), glm::length(m.before - x)});
+                            break;
+                        }
                     }
-                }
-        }
-    });
+            }
+        });
     for (std::size_t p = 0; p < cache.size(); ++p) {
         if (!std::isfinite(key[p])) continue;
         if (!mQueuedFlag[p]) {
@@ -237,9 +240,8 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
             estimateIndirect(*cache, delta->newSegments, mSegments, 1.0);
             mStats.deltaSegments = delta->oldSegments.size() + delta->newSegments.size();
         }
-        const double toIrradiance =
-            1.0 / (glm::pi<double>() * double(cache->settings.detpRadius) *
-                   double(cache->settings.detpRadius));
+        const double toIrradiance = 1.0 / (glm::pi<double>() * double(cache->settings.detpRadius) *
+                                           double(cache->settings.detpRadius));
         if (full) {
             for (std::size_t p = 0; p < cache->size(); ++p)
                 cache->indirect[p] = glm::vec3(glm::max(mPowerSum[p] * toIrradiance, 0.0));

@@ -39,7 +39,8 @@ struct PhotonSegments;
  *     not written;
  *   - soft shadows: for each mobile whose WorldTransform changed, every point from which the
  *     mobile's bounding sphere (at the old or the new pose) comes within a light's bounding
- *     radius of the segment to that light's centre is queued, keyed by its distance to the
+ *     radius of the segment to that light's centre (lights wholly below the point's horizon
+ *     skipped) is queued, keyed by its distance to the
  *     mobile; then at most updateBudget queued points, nearest first (ties by index), are
  *     re-shaded with shadow rays; the rest wait for the next frames.
  *  Shading uses random numbers keyed by the point, never by the frame: identical frames give
@@ -52,12 +53,12 @@ struct PhotonSegments;
 class PointCacheSystem {
 public:
     struct FrameStats {
-        bool fullIndirect = false;      ///< every point's indirect re-estimated
-        std::size_t deltaSegments = 0;  ///< delta segments traced against the point discs
-        std::size_t indirectWritten = 0;///< points whose indirect value changed
-        std::size_t queued = 0;         ///< points newly queued for soft-shadow refresh
-        std::size_t refreshed = 0;      ///< points re-shaded this frame (<= updateBudget)
-        std::size_t pending = 0;        ///< queued points left for later frames
+        bool fullIndirect = false;       ///< every point's indirect re-estimated
+        std::size_t deltaSegments = 0;   ///< delta segments traced against the point discs
+        std::size_t indirectWritten = 0; ///< points whose indirect value changed
+        std::size_t queued = 0;          ///< points newly queued for soft-shadow refresh
+        std::size_t refreshed = 0;       ///< points re-shaded this frame (<= updateBudget)
+        std::size_t pending = 0;         ///< queued points left for later frames
     };
 
     /// Throws qgi::Error for settings out of range.
@@ -79,7 +80,8 @@ public:
     const std::vector<AreaLight>& areaLights() const { return mLights; }
 
 private:
-    void shadePoints(const RayScene& scene, PointCache& cache, std::span<const std::uint32_t> points);
+    void shadePoints(const RayScene& scene, PointCache& cache,
+                     std::span<const std::uint32_t> points);
     void estimateIndirect(PointCache& cache, const PhotonSegments& segments,
                           std::span<const std::uint32_t> indices, double sign);
     void queueShadowed(const Registry& registry, const PointCache& cache);

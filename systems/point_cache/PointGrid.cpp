@@ -15,6 +15,11 @@ void PointGrid::build(std::span<const glm::vec3> positions, std::span<const glm:
                       std::span<const float> searchRadii, const Params& params) {
     QGI_ASSERT(positions.size() == normals.size() && positions.size() == searchRadii.size());
     QGI_ASSERT(params.cellSize > 0.f && std::isfinite(params.cellSize));
+    for (std::size_t p = 0; p < positions.size(); ++p)
+        QGI_ASSERT(std::isfinite(positions[p].x + positions[p].y + positions[p].z) &&
+                       std::isfinite(normals[p].x + normals[p].y + normals[p].z) &&
+                       searchRadii[p] > 0.f && std::isfinite(searchRadii[p]),
+                   "point ", p, " is not finite");
     mParams = params;
     mPositions.assign(positions.begin(), positions.end());
     mNormals.assign(normals.begin(), normals.end());
@@ -53,23 +58,21 @@ void PointGrid::build(std::span<const glm::vec3> positions, std::span<const glm:
     // Two passes (count, fill) over the same conservative overlap rule.
     const auto forEachCell = [&](std::size_t p, auto&& emit) {
         const glm::vec3 half = discHalf(p);
-        const glm::ivec3 a = glm::clamp(glm::ivec3(glm::floor((mPositions[p] - half - mOrigin) /
-                                                              mCellSize)),
-                                        glm::ivec3(0), mDims - 1);
-        const glm::ivec3 b = glm::clamp(glm::ivec3(glm::floor((mPositions[p] + half - mOrigin) /
-                                                              mCellSize)),
-                                        glm::ivec3(0), mDims - 1);
+        const glm::ivec3 a =
+            glm::clamp(glm::ivec3(glm::floor((mPositions[p] - half - mOrigin) / mCellSize)),
+                       glm::ivec3(0), mDims - 1);
+        const glm::ivec3 b =
+            glm::clamp(glm::ivec3(glm::floor((mPositions[p] + half - mOrigin) / mCellSize)),
+                       glm::ivec3(0), mDims - 1);
         const glm::vec3 n = mNormals[p];
         const float reach = 0.5f * mCellSize * (std::abs(n.x) + std::abs(n.y) + std::abs(n.z));
         const float thickness = params.planeTolerance * mRadii[p] * (1.f + 1e-4f) + 1e-6f;
         for (int k = a.z; k <= b.z; ++k)
             for (int j = a.y; j <= b.y; ++j)
                 for (int i = a.x; i <= b.x; ++i) {
-                    const glm::vec3 centre =
-                        mOrigin + (glm::vec3(i, j, k) + 0.5f) * mCellSize;
+                    const glm::vec3 centre = mOrigin + (glm::vec3(i, j, k) + 0.5f) * mCellSize;
                     // The cell box meets the thick plane slab.
-                    if (std::abs(glm::dot(n, centre - mPositions[p])) > reach + thickness)
-                        continue;
+                    if (std::abs(glm::dot(n, centre - mPositions[p])) > reach + thickness) continue;
                     emit(std::size_t((k * mDims.y + j) * mDims.x + i));
                 }
     };
@@ -104,8 +107,8 @@ std::span<const std::uint32_t> PointGrid::candidates(const glm::vec3& x) const {
         return {};
     const glm::ivec3 c(cell);
     const std::size_t index = std::size_t((c.z * mDims.y + c.y) * mDims.x + c.x);
-    return std::span<const std::uint32_t>(mCellPoints).subspan(
-        mCellStart[index], mCellStart[index + 1] - mCellStart[index]);
+    return std::span<const std::uint32_t>(mCellPoints)
+        .subspan(mCellStart[index], mCellStart[index + 1] - mCellStart[index]);
 }
 
 } // namespace qgi

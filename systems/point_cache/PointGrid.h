@@ -21,9 +21,9 @@ namespace qgi {
 class PointGrid {
 public:
     struct Params {
-        float cellSize = 1.f;          ///< metres
+        float cellSize = 1.f; ///< metres
         float minNormalCosine = 0.5f;
-        float planeTolerance = 0.5f;   ///< fraction of R_p
+        float planeTolerance = 0.5f; ///< fraction of R_p
     };
 
     /// Longest allowed cell count; a build that would need more cells uses wider cells.

@@ -55,7 +55,9 @@ public:
 private:
     glm::ivec3 cellOf(const glm::vec3& p) const { return glm::ivec3(glm::floor(p / mCell)); }
     static std::uint64_t key(const glm::ivec3& c) {
-        const auto part = [](int v) { return std::uint64_t(std::uint32_t(v + (1 << 20)) & 0x1fffffu); };
+        const auto part = [](int v) {
+            return std::uint64_t(std::uint32_t(v + (1 << 20)) & 0x1fffffu);
+        };
         return part(c.x) | (part(c.y) << 21) | (part(c.z) << 42);
     }
     float mCell;
@@ -110,28 +112,30 @@ std::vector<DartSource> makeDartSources(const Registry& registry, const RayScene
     const std::uint64_t seedKey = photon::mixBits(s.seed ^ kParticleStream);
     tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, first, 64),
                       [&](const tbb::blocked_range<std::uint32_t>& range) {
-        for (std::uint32_t i = range.begin(); i != range.end(); ++i) {
-            const PhotonHead head = emitPhoton(*owner[i], i, s.seed);
-            Ray ray;
-            ray.origin = head.origin;
-            ray.direction = head.direction;
-            for (std::uint32_t b = 0; b <= s.particleBounces; ++b) {
-                const std::optional<Hit> hit = scene.intersect(ray);
-                if (!hit) break;
-                const glm::vec3 at = ray.origin + hit->t * ray.direction;
-                const glm::vec3 facing =
-                    glm::dot(hit->normal, ray.direction) < 0.f ? hit->normal : -hit->normal;
-                if (!scene.isMobile(hit->entity)) perParticle[i].push_back({at, facing});
-                if (b == s.particleBounces) break;
-                ray.origin = photon::offsetFromSurface(at, facing);
-                ray.direction = photon::sampleCosine(photon::Frame(facing),
-                                                     photon::hashUniform(seedKey, i, b, 0),
-                                                     photon::hashUniform(seedKey, i, b, 1));
-                ray.tnear = 0.f;
-                ray.tfar = std::numeric_limits<float>::infinity();
-            }
-        }
-    });
+                          for (std::uint32_t i = range.begin(); i != range.end(); ++i) {
+                              const PhotonHead head = emitPhoton(*owner[i], i, s.seed);
+                              Ray ray;
+                              ray.origin = head.origin;
+                              ray.direction = head.direction;
+                              for (std::uint32_t b = 0; b <= s.particleBounces; ++b) {
+                                  const std::optional<Hit> hit = scene.intersect(ray);
+                                  if (!hit) break;
+                                  const glm::vec3 at = ray.origin + hit->t * ray.direction;
+                                  const glm::vec3 facing =
+                                      glm::dot(hit->normal, ray.direction) < 0.f ? hit->normal
+                                                                                 : -hit->normal;
+                                  if (!scene.isMobile(hit->entity))
+                                      perParticle[i].push_back({at, facing});
+                                  if (b == s.particleBounces) break;
+                                  ray.origin = photon::offsetFromSurface(at, facing);
+                                  ray.direction = photon::sampleCosine(
+                                      photon::Frame(facing), photon::hashUniform(seedKey, i, b, 0),
+                                      photon::hashUniform(seedKey, i, b, 1));
+                                  ray.tnear = 0.f;
+                                  ray.tfar = std::numeric_limits<float>::infinity();
+                              }
+                          }
+                      });
     std::vector<DartSource> sources;
     for (const auto& list : perParticle)
         sources.insert(sources.end(), list.begin(), list.end());
@@ -174,28 +178,31 @@ PointSetStats buildPointSet(const Registry& registry, const RayScene& scene,
         // batch, compute AO ahead (pure function: the same value the decision would compute).
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 64),
                           [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t k = range.begin(); k != range.end(); ++k) {
-                const std::uint64_t d = base + k;
-                const DartSource& src = sources[std::size_t(d % sources.size())];
-                Ray ray;
-                ray.origin = photon::offsetFromSurface(src.position, src.normal);
-                ray.direction = photon::sampleCosine(
-                    photon::Frame(src.normal), photon::hashUniform(dartKey, std::uint32_t(d), 0, 0),
-                    photon::hashUniform(dartKey, std::uint32_t(d), 0, 1));
-                const std::optional<Hit> hit = scene.intersect(ray);
-                Landing& l = landings[k];
-                l.valid = hit && !scene.isMobile(hit->entity);
-                hasAo[k] = 0;
-                if (!l.valid) continue;
-                l.position = ray.origin + hit->t * ray.direction;
-                l.normal = glm::dot(hit->normal, ray.direction) < 0.f ? hit->normal : -hit->normal;
-                const float e = grid.nearest(l.position, cache.position);
-                if (!s.trivialTests || (e >= s.rMin && e < s.rMax)) {
-                    aoAhead[k] = aoOf(l, d);
-                    hasAo[k] = 1;
-                }
-            }
-        });
+                              for (std::size_t k = range.begin(); k != range.end(); ++k) {
+                                  const std::uint64_t d = base + k;
+                                  const DartSource& src = sources[std::size_t(d % sources.size())];
+                                  Ray ray;
+                                  ray.origin = photon::offsetFromSurface(src.position, src.normal);
+                                  ray.direction = photon::sampleCosine(
+                                      photon::Frame(src.normal),
+                                      photon::hashUniform(dartKey, std::uint32_t(d), 0, 0),
+                                      photon::hashUniform(dartKey, std::uint32_t(d), 0, 1));
+                                  const std::optional<Hit> hit = scene.intersect(ray);
+                                  Landing& l = landings[k];
+                                  l.valid = hit && !scene.isMobile(hit->entity);
+                                  hasAo[k] = 0;
+                                  if (!l.valid) continue;
+                                  l.position = ray.origin + hit->t * ray.direction;
+                                  l.normal = glm::dot(hit->normal, ray.direction) < 0.f
+                                                 ? hit->normal
+                                                 : -hit->normal;
+                                  const float e = grid.nearest(l.position, cache.position);
+                                  if (!s.trivialTests || (e >= s.rMin && e < s.rMax)) {
+                                      aoAhead[k] = aoOf(l, d);
+                                      hasAo[k] = 1;
+                                  }
+                              }
+                          });
         for (std::size_t k = 0; k < count && !done; ++k) {
             const std::uint64_t d = base + k;
             ++stats.darts;
@@ -248,18 +255,19 @@ PointSetStats buildPointSet(const Registry& registry, const RayScene& scene,
     cache.radius.assign(cache.position.size(), s.rMax);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cache.position.size(), 64),
                       [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t p = range.begin(); p != range.end(); ++p) {
-            cache.ao[p] = ambientOcclusion(scene, cache.position[p], cache.normal[p], s.aoRays,
-                                           s.aoDistance, s.seed, cache.dart[p]);
-            cache.radius[p] = spacingRadius(cache.ao[p], s.rMin, s.rMax);
-        }
-    });
-    static constexpr const char* kStop[] = {"consecutive rejections", "dart budget",
-                                            "point budget", "no dart sources"};
+                          for (std::size_t p = range.begin(); p != range.end(); ++p) {
+                              cache.ao[p] =
+                                  ambientOcclusion(scene, cache.position[p], cache.normal[p],
+                                                   s.aoRays, s.aoDistance, s.seed, cache.dart[p]);
+                              cache.radius[p] = spacingRadius(cache.ao[p], s.rMin, s.rMax);
+                          }
+                      });
+    static constexpr const char* kStop[] = {"consecutive rejections", "dart budget", "point budget",
+                                            "no dart sources"};
     logInfo("point cache: ", stats.points, " points from ", stats.darts, " darts (",
-            stats.trivialAccepts, " trivial accepts, ", stats.trivialRejects,
-            " trivial rejects, ", stats.aoCalls, " AO calls, ", stats.misses,
-            " misses); stopped by ", kStop[int(stats.stop)]);
+            stats.trivialAccepts, " trivial accepts, ", stats.trivialRejects, " trivial rejects, ",
+            stats.aoCalls, " AO calls, ", stats.misses, " misses); stopped by ",
+            kStop[int(stats.stop)]);
     return stats;
 }
 

@@ -19,13 +19,13 @@ enum class PointSetStop : std::uint8_t { Rejections, DartBudget, PointBudget, No
 
 /// What a build did (the stopping rule's inputs and the AO optimisation's effect).
 struct PointSetStats {
-    std::uint32_t particles = 0;        ///< light particles shot
-    std::uint32_t sources = 0;          ///< hemispherical dart sources they left
-    std::uint64_t darts = 0;            ///< darts thrown
-    std::uint64_t misses = 0;           ///< darts that left the scene or hit a mobile
-    std::uint64_t trivialAccepts = 0;   ///< no point within rMax: accepted without AO
-    std::uint64_t trivialRejects = 0;   ///< a point within rMin: rejected without AO
-    std::uint64_t aoCalls = 0;          ///< darts whose fate needed their AO
+    std::uint32_t particles = 0;      ///< light particles shot
+    std::uint32_t sources = 0;        ///< hemispherical dart sources they left
+    std::uint64_t darts = 0;          ///< darts thrown
+    std::uint64_t misses = 0;         ///< darts that left the scene or hit a mobile
+    std::uint64_t trivialAccepts = 0; ///< no point within rMax: accepted without AO
+    std::uint64_t trivialRejects = 0; ///< a point within rMin: rejected without AO
+    std::uint64_t aoCalls = 0;        ///< darts whose fate needed their AO
     std::uint32_t points = 0;
     PointSetStop stop = PointSetStop::Rejections;
 };

@@ -76,8 +76,8 @@ LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::u
         const std::size_t t = std::min(std::size_t(it - light.cdf.begin()), light.cdf.size() - 1);
         const float low = t > 0 ? light.cdf[t - 1] : 0.f;
         const float width = light.cdf[t] - low;
-        const float v1 = width > 0.f ? std::clamp((u1 - low) / width, 0.f, photon::kOneMinusEpsilon)
-                                     : 0.f;
+        const float v1 =
+            width > 0.f ? std::clamp((u1 - low) / width, 0.f, photon::kOneMinusEpsilon) : 0.f;
         const auto& tri = light.triangles[t];
         const glm::vec2 st = photon::sampleTriangle(v1, u2);
         const glm::vec3 y = tri.corner + st.x * tri.edge1 + st.y * tri.edge2;
@@ -116,9 +116,10 @@ float ambientOcclusion(const RayScene& scene, const glm::vec3& x, const glm::vec
                                              photon::hashUniform(seedKey, key, 0, 2 * r + 1));
         ray.tfar = distance;
         const bool hit =
-            anyMobile ? scene.occludedFiltered(
-                            ray, [&](const Hit& candidate) { return !scene.isMobile(candidate.entity); })
-                      : scene.occluded(ray);
+            anyMobile
+                ? scene.occludedFiltered(
+                      ray, [&](const Hit& candidate) { return !scene.isMobile(candidate.entity); })
+                : scene.occluded(ray);
         occluded += hit ? 1u : 0u;
     }
     return float(occluded) / float(rays);

@@ -17,11 +17,11 @@ struct Aabb;
 /// An area light: a static mesh whose Material emits (uniform radiance on its front side).
 struct AreaLight {
     Entity entity;
-    glm::vec3 radiance{0.f}; ///< W/(m^2 sr), linear RGB
+    glm::vec3 radiance{0.f};                        ///< W/(m^2 sr), linear RGB
     std::vector<PhotonEmitter::Triangle> triangles; ///< world space, non-zero area
-    std::vector<float> cdf;  ///< cumulative area fraction, last entry 1
-    float area = 0.f;        ///< m^2
-    glm::vec3 centre{0.f};   ///< bounding sphere of the triangles
+    std::vector<float> cdf;                         ///< cumulative area fraction, last entry 1
+    float area = 0.f;                               ///< m^2
+    glm::vec3 centre{0.f};                          ///< bounding sphere of the triangles
     float boundRadius = 0.f;
 };
 

@@ -39,10 +39,10 @@ struct Atrium {
         setLogLevel(LogLevel::Warning);
         buildBuiltinScene(registry, "atrium", SceneOptions{});
         registry.ctx().emplace<RayScene>().build(registry);
-        registry.view<const MobileMesh, const Name>().each([&](Entity e, const MobileMesh&,
-                                                              const Name& name) {
-            if (name.value.find("crate") != std::string::npos && !crate) crate = e;
-        });
+        registry.view<const MobileMesh, const Name>().each(
+            [&](Entity e, const MobileMesh&, const Name& name) {
+                if (name.value.find("crate") != std::string::npos && !crate) crate = e;
+            });
         rest = registry.get<WorldTransform>(crate).matrix;
     }
 };

@@ -63,10 +63,18 @@ void renderRoom(benchmark::State& state, bool pointCache) {
     const glm::mat4 scale = glm::scale(glm::mat4(1.f), glm::vec3(4.f));
     const glm::mat4 poses[5] = {
         glm::translate(glm::mat4(1.f), {-2.f, 0.f, -2.f}) * scale,
-        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 0.f, 2.f}), glm::radians(90.f), {0, 1, 0}) * scale,
-        glm::rotate(glm::translate(glm::mat4(1.f), {2.f, 0.f, -2.f}), glm::radians(-90.f), {0, 1, 0}) * scale,
-        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 0.f, 2.f}), glm::radians(-90.f), {1, 0, 0}) * scale,
-        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 4.f, -2.f}), glm::radians(90.f), {1, 0, 0}) * scale,
+        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 0.f, 2.f}), glm::radians(90.f),
+                    {0, 1, 0}) *
+            scale,
+        glm::rotate(glm::translate(glm::mat4(1.f), {2.f, 0.f, -2.f}), glm::radians(-90.f),
+                    {0, 1, 0}) *
+            scale,
+        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 0.f, 2.f}), glm::radians(-90.f),
+                    {1, 0, 0}) *
+            scale,
+        glm::rotate(glm::translate(glm::mat4(1.f), {-2.f, 4.f, -2.f}), glm::radians(90.f),
+                    {1, 0, 0}) *
+            scale,
     };
     PointCache* cache = pointCache ? &world.ctx().emplace<PointCache>() : nullptr;
     const std::uint32_t perWall = std::uint32_t(state.range(0)) / 5;
@@ -80,7 +88,8 @@ void renderRoom(benchmark::State& state, bool pointCache) {
         world.emplace<Mesh>(e, wall);
         world.emplace<WorldTransform>(e, WorldTransform{pose});
         world.emplace<Material>(e);
-        world.emplace<VertexIrradiance>(e).irradiance.assign(wall.positions.size(), glm::vec3(0.5f));
+        world.emplace<VertexIrradiance>(e).irradiance.assign(wall.positions.size(),
+                                                             glm::vec3(0.5f));
         if (!cache) continue;
         world.emplace<PointCacheShaded>(e);
         // Points face the wall's front (+z of its frame); a side seen from the back finds

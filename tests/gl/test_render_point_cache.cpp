@@ -55,9 +55,8 @@ TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
         Camera& cam = world.emplace<Camera>(camera);
         cam.yfov = kFov;
         cam.active = true;
-        const glm::mat4 pose =
-            glm::rotate(glm::translate(glm::mat4(1.f), {0.f, kHeight, 0.f}),
-                        -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f));
+        const glm::mat4 pose = glm::rotate(glm::translate(glm::mat4(1.f), {0.f, kHeight, 0.f}),
+                                           -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f));
         world.emplace<WorldTransform>(camera, WorldTransform{pose});
 
         // Random points on the floor (a gap on the left half-plane x < -1.2 shows the fallback).

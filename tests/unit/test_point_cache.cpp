@@ -22,10 +22,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <random>
-#include <set>
 
 namespace qgi {
 namespace {
@@ -64,8 +61,8 @@ PointCacheSettings roomSettings() {
 PointCache buildSet(Registry& registry, const PointCacheSettings& settings, PointSetStats* stats) {
     PointCache cache;
     cache.settings = resolvePointCacheSettings(settings, staticBounds(registry));
-    const PointSetStats st = buildPointSet(registry, registry.ctx().get<RayScene>(),
-                                           cache.settings, staticBounds(registry), cache);
+    const PointSetStats st = buildPointSet(registry, registry.ctx().get<RayScene>(), cache.settings,
+                                           staticBounds(registry), cache);
     if (stats) *stats = st;
     return cache;
 }
@@ -224,8 +221,8 @@ TEST(PointSetBuild, NoPointsWhereLightCannotReach) {
         EXPECT_LE(std::abs(x.y), 1.f + 1e-4f);
         EXPECT_LE(std::abs(x.z), 2.f + 1e-4f);
         const glm::vec3 local = x - boxCentre;
-        const bool onClosedBox = std::max({std::abs(local.x), std::abs(local.y),
-                                           std::abs(local.z)}) < 0.3f + 1e-4f;
+        const bool onClosedBox =
+            std::max({std::abs(local.x), std::abs(local.y), std::abs(local.z)}) < 0.3f + 1e-4f;
         if (onClosedBox) {
             ++onBox;
             EXPECT_GT(glm::dot(n, local), 0.f) << "a point inside the closed box";
@@ -285,10 +282,10 @@ std::vector<Query> randomQueries(std::uint32_t count, std::uint32_t seed) {
     for (std::uint32_t i = 0; i < count; ++i) {
         const glm::vec3 x(5.f * u(rng) - 2.5f, 0.3f * u(rng) - 0.15f, 5.f * u(rng) - 2.5f);
         const float k = u(rng);
-        const glm::vec3 n = k < 0.2f   ? glm::vec3(0.f, -1.f, 0.f)
-                            : k < 0.4f ? glm::normalize(glm::vec3(u(rng) - .5f, u(rng) - .5f,
-                                                                  u(rng) - .5f))
-                                       : glm::vec3(0.f, 1.f, 0.f);
+        const glm::vec3 n =
+            k < 0.2f   ? glm::vec3(0.f, -1.f, 0.f)
+            : k < 0.4f ? glm::normalize(glm::vec3(u(rng) - .5f, u(rng) - .5f, u(rng) - .5f))
+                       : glm::vec3(0.f, 1.f, 0.f);
         out.push_back({x, n});
     }
     return out;
@@ -315,7 +312,8 @@ TEST(PointCacheQuery, GridFindsExactlyWhatBruteForceFinds) {
         std::size_t nonEmpty = 0;
         for (const Query& q : randomQueries(3000, 11)) {
             std::vector<std::uint32_t> found;
-            cache.grid.forEachInRange(q.x, q.n, [&](std::uint32_t p, float) { found.push_back(p); });
+            cache.grid.forEachInRange(q.x, q.n,
+                                      [&](std::uint32_t p, float) { found.push_back(p); });
             const std::vector<std::uint32_t> expected = bruteForce(cache, q);
             ASSERT_EQ(found, expected) << "cell " << cell;
             nonEmpty += expected.empty() ? 0 : 1;
@@ -420,7 +418,8 @@ TEST(PointCacheQuery, IdenticalQueriesGiveIdenticalResults) {
     ASSERT_TRUE(std::equal(a.grid.cellPoints().begin(), a.grid.cellPoints().end(),
                            b.grid.cellPoints().begin(), b.grid.cellPoints().end()));
     for (const Query& q : randomQueries(500, 2)) {
-        const PointCacheSample s = a.sample(q.x, q.n), t = b.sample(q.x, q.n), u = a.sample(q.x, q.n);
+        const PointCacheSample s = a.sample(q.x, q.n), t = b.sample(q.x, q.n),
+                               u = a.sample(q.x, q.n);
         EXPECT_EQ(std::memcmp(&s, &t, sizeof s), 0);
         EXPECT_EQ(std::memcmp(&s, &u, sizeof s), 0);
     }

@@ -5,7 +5,9 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
+#include "systems/frame/FrameSchedule.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/point_cache/PointCache.h"
@@ -28,8 +30,8 @@ namespace qgi {
 namespace {
 
 using test::addMesh;
-using test::gridMesh;
 using test::grey;
+using test::gridMesh;
 using test::translation;
 
 // Geometry of the soft-shadow scene, metres: a floor at y = 0, a square blocker at kBlockerY,
@@ -49,11 +51,11 @@ struct ShadowScene {
             addMesh(registry, gridMesh({-6.f, 3.f, -6.f}, {12.f, 0.f, 0.f}, {0.f, 0.f, 12.f}, 1),
                     glm::mat4(1.f), grey(0.5f), false, "ceiling");
         if (withBlocker)
-            blocker = addMesh(registry,
-                              gridMesh({-kBlockerHalf, 0.f, -kBlockerHalf},
-                                       {2.f * kBlockerHalf, 0.f, 0.f}, {0.f, 0.f, 2.f * kBlockerHalf}, 1),
-                              translation({0.f, kBlockerY, 0.f}), grey(0.5f), blockerMobile,
-                              "blocker");
+            blocker =
+                addMesh(registry,
+                        gridMesh({-kBlockerHalf, 0.f, -kBlockerHalf},
+                                 {2.f * kBlockerHalf, 0.f, 0.f}, {0.f, 0.f, 2.f * kBlockerHalf}, 1),
+                        translation({0.f, kBlockerY, 0.f}), grey(0.5f), blockerMobile, "blocker");
         Material light = grey(0.5f);
         light.emission = glm::vec3(kRadiance);
         // cross(u, v) = -y: the light faces the floor.
@@ -106,9 +108,8 @@ Reference reference(const glm::vec3& x, int n, bool withBlocker,
     const double dA = cell * cell;
     r.irradiance = kRadiance * sum * dA;
     // One uniform sample estimates L A f V: variance L^2 A^2 E[(fV)^2] - E^2.
-    r.sampleVariance =
-        std::max(0.0, kRadiance * kRadiance * area * area * (sum2 / (n * n)) -
-                          r.irradiance * r.irradiance);
+    r.sampleVariance = std::max(0.0, kRadiance * kRadiance * area * area * (sum2 / (n * n)) -
+                                         r.irradiance * r.irradiance);
     // Smooth part: the midpoint rule on f (|f''| over a cell is tiny at these distances) is
     // bounded generously by 1e-4 relative; cells cut by the shadow edge by their full weight.
     r.quadratureBound = kRadiance * (cut * fMax * dA) + 1e-4 * r.irradiance;
@@ -133,10 +134,11 @@ TEST(PointCacheShading, UnoccludedLightMatchesLambertsClosedForm) {
     const std::vector<AreaLight> lights = findAreaLights(scene.registry, Aabb{});
     ASSERT_EQ(lights.size(), 1u);
     EXPECT_NEAR(lights[0].area, 1.f, 1e-6f);
-    const glm::dvec3 corners[4] = {{-0.5, 1.5, -0.5}, {0.5, 1.5, -0.5}, {0.5, 1.5, 0.5},
-                                   {-0.5, 1.5, 0.5}};
+    const glm::dvec3 corners[4] = {
+        {-0.5, 1.5, -0.5}, {0.5, 1.5, -0.5}, {0.5, 1.5, 0.5}, {-0.5, 1.5, 0.5}};
     const std::uint32_t samples = 64;
-    for (const glm::vec3 x : {glm::vec3(0.f), glm::vec3(0.6f, 0.f, 0.2f), glm::vec3(2.f, 0.f, -1.f)}) {
+    for (const glm::vec3 x :
+         {glm::vec3(0.f), glm::vec3(0.6f, 0.f, 0.2f), glm::vec3(2.f, 0.f, -1.f)}) {
         const double exact = lambertPolygon(glm::dvec3(x), {0.0, 1.0, 0.0}, corners);
         const Reference ref = reference(x, 400, false);
         EXPECT_NEAR(ref.irradiance, exact, 1e-3 * exact); // the quadrature itself
@@ -155,9 +157,10 @@ TEST(PointCacheShading, SoftShadowBehindABlockerMatchesTheReference) {
     const std::uint32_t samples = 64;
     int penumbra = 0;
     // Umbra, penumbra and lit points along a line and off it.
-    for (const glm::vec3 x : {glm::vec3(0.f), glm::vec3(0.3f, 0.f, 0.f), glm::vec3(0.45f, 0.f, 0.1f),
-                              glm::vec3(0.6f, 0.f, 0.f), glm::vec3(0.5f, 0.f, 0.5f),
-                              glm::vec3(0.8f, 0.f, -0.3f), glm::vec3(2.f, 0.f, 0.f)}) {
+    for (const glm::vec3 x :
+         {glm::vec3(0.f), glm::vec3(0.3f, 0.f, 0.f), glm::vec3(0.45f, 0.f, 0.1f),
+          glm::vec3(0.6f, 0.f, 0.f), glm::vec3(0.5f, 0.f, 0.5f), glm::vec3(0.8f, 0.f, -0.3f),
+          glm::vec3(2.f, 0.f, 0.f)}) {
         const Reference ref = reference(x, 400, true);
         const LightSample s = shadeAreaLight(scene.registry.ctx().get<RayScene>(), lights[0], 0, x,
                                              {0.f, 1.f, 0.f}, samples, 1, 99);
@@ -203,8 +206,8 @@ TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
 // ---- the cache file --------------------------------------------------------------------------
 
 std::filesystem::path scratch(const char* name) {
-    const auto dir = std::filesystem::temp_directory_path() /
-                     ("qgi_point_cache_" + std::to_string(::getpid()));
+    const auto dir =
+        std::filesystem::temp_directory_path() / ("qgi_point_cache_" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir);
     return dir / name;
 }
@@ -246,7 +249,7 @@ TEST(PointCacheFile, RoundTripsAndIsLoadedOnTheNextStart) {
     EXPECT_TRUE(same(loaded.direct, built.direct));
     EXPECT_TRUE(same(loaded.visibility, built.visibility));
     EXPECT_TRUE(same(loaded.dart, built.dart));
-    std::filesystem::remove(file);
+    std::filesystem::remove_all(std::filesystem::path(file).parent_path());
 }
 
 TEST(PointCacheFile, CorruptTruncatedAndStaleFilesAreRejectedAndRebuilt) {
@@ -310,7 +313,7 @@ TEST(PointCacheFile, CorruptTruncatedAndStaleFilesAreRejectedAndRebuilt) {
     stale.build(scene.registry);
     EXPECT_FALSE(stale.loadedFromFile());
     EXPECT_THROW(readPointCacheFile("/nonexistent/dir/x.qpc", key, into), Error);
-    std::filesystem::remove(file);
+    std::filesystem::remove_all(std::filesystem::path(file).parent_path());
 }
 
 // ---- per-frame update ---------------------------------------------------------------------------
@@ -339,9 +342,9 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     // Identical frames change nothing.
     system.update(scene.registry, FrameContext{1});
     EXPECT_EQ(system.lastFrame().refreshed, 0u);
-    EXPECT_EQ(std::memcmp(cache.direct.data(), before.direct.data(),
-                          cache.size() * sizeof(glm::vec3)),
-              0);
+    EXPECT_EQ(
+        std::memcmp(cache.direct.data(), before.direct.data(), cache.size() * sizeof(glm::vec3)),
+        0);
 
     // Move the blocker 0.4 m along x.
     const glm::vec3 offset(0.4f, 0.f, 0.f);
@@ -386,12 +389,19 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     const auto& light = system.areaLights()[0];
     std::size_t mismatches = 0;
     for (std::size_t p = 0; p < cache.size(); ++p) {
-        const LightSample s = shadeAreaLight(rays, light, 0, cache.position[p], cache.normal[p],
-                                             cache.settings.shadowSamples, cache.settings.seed,
-                                             cache.dart[p]);
+        const LightSample s =
+            shadeAreaLight(rays, light, 0, cache.position[p], cache.normal[p],
+                           cache.settings.shadowSamples, cache.settings.seed, cache.dart[p]);
         mismatches += std::memcmp(&s.irradiance, &cache.direct[p], sizeof(glm::vec3)) != 0;
     }
     EXPECT_EQ(mismatches, 0u);
+    // Shading updates never touch the point set itself.
+    ASSERT_EQ(cache.size(), before.size());
+    EXPECT_EQ(std::memcmp(cache.position.data(), before.position.data(),
+                          cache.size() * sizeof(glm::vec3)),
+              0);
+    EXPECT_EQ(cache.radius, before.radius);
+    EXPECT_EQ(cache.ao, before.ao);
 }
 
 TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
@@ -417,6 +427,27 @@ TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
     for (const glm::vec3& e : cache.indirect)
         total += e.x;
     EXPECT_GT(total, 0.0);
+    // DETP written out: every stored segment after a bounce that crosses a point's disc
+    // (crossesDisc, the rule DiscIndex is checked against), over pi r^2.
+    {
+        const PhotonStore& store = registry.ctx().get<PhotonStore>();
+        const float r = cache.settings.detpRadius;
+        const auto& s = store.segments;
+        for (std::size_t p = 0; p < cache.size(); p += 7) {
+            glm::dvec3 sum(0.0);
+            for (const PhotonPath& path : store.paths)
+                for (std::uint32_t k = 0; k < path.count; ++k) {
+                    const std::size_t i = path.first + k;
+                    if (s.bounce[i] == 0) continue;
+                    if (crossesDisc(s.origin[i], s.direction[i], s.length[i], cache.position[p],
+                                    cache.normal[p], r))
+                        sum += glm::dvec3(s.power[i]);
+                }
+            const glm::dvec3 expected = sum / (glm::pi<double>() * double(r) * double(r));
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(cache.indirect[p][c], expected[c], 1e-5 * (1.0 + expected[c])) << p;
+        }
+    }
     const std::vector<glm::vec3> before = cache.indirect;
 
     // Move the cube; the incremental value must equal a full re-estimate over the new set.
@@ -436,8 +467,43 @@ TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
     EXPECT_TRUE(system.lastFrame().fullIndirect);
     for (std::size_t p = 0; p < cache.size(); ++p)
         for (int c = 0; c < 3; ++c)
-            EXPECT_NEAR(incremental[p][c], cache.indirect[p][c], 1e-4f * (1.f + cache.indirect[p][c]))
+            EXPECT_NEAR(incremental[p][c], cache.indirect[p][c],
+                        1e-4f * (1.f + cache.indirect[p][c]))
                 << p;
+}
+
+TEST(PointCacheSchedule, RunsAsTheTimedPointCachePhase) {
+    ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
+    FrameSettings settings;
+    settings.photons->photonCount = 5000;
+    settings.irradiance.discRadius = 0.2f;
+    settings.render.reset();
+    settings.pointCache = PointCacheSettings{};
+    settings.pointCache->rMin = 0.1f;
+    settings.pointCache->rMax = 0.3f;
+    settings.pointCache->stopAfterRejections = 500;
+    settings.pointCache->particleCount = 512;
+    settings.pointCache->updateBudget = 7;
+    FrameSchedule frame(scene.registry, settings);
+    ASSERT_NE(frame.pointCache(), nullptr);
+    bool listed = false;
+    for (const Schedule::Entry* entry : frame.schedule().entries())
+        listed |= entry->name == "point.cache";
+    EXPECT_TRUE(listed);
+    FrameProfiler& profiler = scene.registry.ctx().get<FrameProfiler>();
+    for (std::uint64_t f = 0; f < 3; ++f) { // Schedule::run opens and closes the profiler frame
+        if (f == 2)                         // the blocker moves: the budget bounds the refresh
+            scene.registry.patch<WorldTransform>(scene.blocker).matrix =
+                translation({0.3f, kBlockerY, 0.f});
+        frame.run(scene.registry, FrameContext{f});
+    }
+    EXPECT_EQ(frame.pointCache()->lastFrame().refreshed, 7u);
+    EXPECT_GT(frame.pointCache()->lastFrame().pending, 0u);
+    bool timed = false;
+    for (const ProfileStats& stats : profiler.statistics())
+        timed |= stats.name == "point.cache" && stats.count == 3;
+    EXPECT_TRUE(timed);
+    EXPECT_GT(scene.registry.ctx().get<PointCache>().size(), 20u);
 }
 
 } // namespace
