@@ -1,7 +1,9 @@
 #include "demo/DemoApp.h"
 
 #include "components/Camera.h"
+#include "components/Material.h"
 #include "components/PathFollower.h"
+#include "components/StaticMesh.h"
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
@@ -12,6 +14,7 @@
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneLoader.h"
 #include "systems/frame/FrameSchedule.h"
+#include "systems/vlf/VlfScene.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -37,6 +40,16 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
 
 void ensureParentDirectory(const std::filesystem::path& base) {
     if (base.has_parent_path()) std::filesystem::create_directories(base.parent_path());
+}
+
+/// Whether a static mesh has a glossy or mirror material (as the VLF reads it).
+bool hasSpecularStatics(const Registry& registry) {
+    bool any = false;
+    registry.view<const StaticMesh, const Material>().each([&](const StaticMesh&, const Material& m) {
+        const vlf::VlfScene::Material vm = vlf::VlfScene::fromComponent(m);
+        any |= vm.specular != glm::vec3(0.f);
+    });
+    return any;
 }
 
 } // namespace
@@ -77,6 +90,17 @@ int runDemo(const DemoOptions& options) {
         frameSettings.irradiance.hybrid = options.mode == "hybrid";
     } else {
         frameSettings.photons.reset();
+    }
+    if (options.vlf == "on" || (options.vlf == "auto" && hasSpecularStatics(world))) {
+        VlfSystemSettings vlf;
+        vlf.bake.directionLevel = options.vlfLevel;
+        vlf.bake.linesPerSide = options.vlfLines;
+        vlf.bake.seed = options.seed;
+        if (options.vlfCache == "auto")
+            vlf.cacheFile = world.ctx().get<SceneInfo>().name + ".vlf";
+        else if (options.vlfCache != "none")
+            vlf.cacheFile = options.vlfCache;
+        frameSettings.vlf = vlf;
     }
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();

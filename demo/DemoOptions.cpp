@@ -73,6 +73,16 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--export-irradiance", o.exportIrradiance,
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
                    "er eg eb (W/m^2) and a mobile flag per vertex");
+    app.add_option("--vlf", o.vlf,
+                   "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
+                   "the scene has such surfaces)")
+        ->check(CLI::IsMember({"on", "off", "auto"}));
+    app.add_option("--vlf-level", o.vlfLevel, "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
+        ->check(CLI::Range(1, 6));
+    app.add_option("--vlf-lines", o.vlfLines, "VLF lines per subfield side (a multiple of 8)")
+        ->check(CLI::Range(8, 1024));
+    app.add_option("--vlf-cache", o.vlfCache,
+                   "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
 
     try {

@@ -3,9 +3,11 @@
 //   albedo / pi * (E_indirect + E_direct) + emission
 // E_indirect is the per-vertex irradiance (photon mode: all light) or the avatar's SH;
 // E_direct, in hybrid mode only (HYBRID defined), comes from the lights with shadow maps.
+// Glossy and mirror static surfaces add their specular radiance from the VLF (vlf.glsl).
 
 #include "common/lighting.glsl"
 #include "common/sh.glsl"
+#include "common/vlf.glsl"
 
 layout(location = UNIFORM_ALBEDO) uniform vec3 uAlbedo;
 layout(location = UNIFORM_EMISSION) uniform vec3 uEmission;
@@ -39,4 +41,6 @@ void main() {
 #endif
 
     oRadiance = vec4(albedo * (1.0 / PI) * irradiance + uEmission, 1.0);
+    // Glossy and mirror static surfaces: their specular part from the baked VLF.
+    oRadiance.rgb += vlfRadiance(vIn.worldPosition, n, normalize(uCameraPosition - vIn.worldPosition));
 }

@@ -19,12 +19,22 @@ constexpr int kMirrored = 15;
 constexpr int kSh = 16; // vec3[9]
 constexpr int kCameraPosition = 25;
 constexpr int kExposure = 26;
+constexpr int kVlfFaces = 27;  // ivec2: first specular face, count
+constexpr int kVlfParams = 28; // ivec4: level, lines per side, tile size, directions
+constexpr int kVlfFrame = 29;  // vec4: VLF centre, radius
 
 // Texture units and buffer binding points.
 constexpr int kBaseColorUnit = 0;
 constexpr int kHdrUnit = 0;
 constexpr int kShadowUnit = 1;
 constexpr int kLightBlockBinding = 0;
+constexpr int kVlfAtlasUnit = 2;
+constexpr int kVlfDirectionsBinding = 1; // shader storage blocks
+constexpr int kVlfTrianglesBinding = 2;
+constexpr int kVlfFacesBinding = 3;
+constexpr int kVlfBlocksBinding = 4;
+constexpr int kVlfSlotsBinding = 5;
+constexpr int kVlfAtlasTiles = 256; // tiles per atlas row
 
 // Array sizes: lights in the light block; shadow layers (a point light takes 6, a spot or
 // directional light 1).

@@ -19,6 +19,11 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.irradiance");
         mIrradiance->build(registry);
     }
+    if (settings.vlf) {
+        mVlf = std::make_unique<VlfSystem>(*settings.vlf);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.vlf");
+        mVlf->build(registry);
+    }
     if (settings.render) mRender = std::make_unique<RenderSystem>(*settings.render);
 
     mSchedule.addPhase("input")

@@ -7,6 +7,7 @@
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/render/RenderSystem.h"
 #include "systems/transform/TransformSystem.h"
+#include "systems/vlf/VlfSystem.h"
 
 #include <memory>
 #include <optional>
@@ -19,6 +20,9 @@ struct FrameSettings {
     DetpSettings irradiance;
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
     std::optional<RenderSettings> render = RenderSettings{};
+    /// Virtual Light Field of the static scene for glossy and mirror surfaces: baked (or
+    /// loaded from its cache) at construction, looked up by the renderer; off by default.
+    std::optional<VlfSystemSettings> vlf;
 };
 
 /** The frame, in one place: owns the systems and lists them in the order they run.
@@ -29,6 +33,7 @@ struct FrameSettings {
  *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
  *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
  *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
+ *    (vlf: baked or loaded at construction; static, so no per-frame entry)
  *    render            uploads dirty ranges, draws, tonemaps
  *
  *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
@@ -50,6 +55,7 @@ private:
     std::unique_ptr<PhotonUpdateSystem> mPhotons;
     std::unique_ptr<DetpIrradianceSystem> mIrradiance;
     std::unique_ptr<RenderSystem> mRender;
+    std::unique_ptr<VlfSystem> mVlf;
 };
 
 } // namespace qgi

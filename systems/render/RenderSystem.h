@@ -58,6 +58,8 @@ private:
     void sortFrontToBack(const glm::vec3& eye);
     GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
     void writeScreenshot(const std::filesystem::path& base) const;
+    /// The VlfField resource in the renderer's layout (rebuilt when the field is replaced).
+    const VlfGpuTables* vlfTables(const Registry& registry);
 
     SceneRenderer mRenderer;
     std::vector<DrawItem> mItems;
@@ -66,6 +68,8 @@ private:
     std::optional<std::filesystem::path> mScreenshot;
     bool mWarnedNoCamera = false;
     bool mWarnedTexture = false;
+    VlfGpuTables mVlf;
+    const void* mVlfSource = nullptr; ///< the VlfField the tables were built from
 };
 
 } // namespace qgi

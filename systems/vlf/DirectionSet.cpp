@@ -30,10 +30,14 @@ std::array<Corners, 4> children(const Corners& t) {
 Corners root(int quadrant) {
     const glm::vec3 x(1.f, 0.f, 0.f), y(0.f, 1.f, 0.f), z(0.f, 0.f, 1.f);
     switch (quadrant) {
-    case 0: return {x, y, z};
-    case 1: return {y, -x, z};
-    case 2: return {-x, -y, z};
-    default: return {-y, x, z};
+    case 0:
+        return {x, y, z};
+    case 1:
+        return {y, -x, z};
+    case 2:
+        return {-x, -y, z};
+    default:
+        return {-y, x, z};
     }
 }
 
@@ -85,7 +89,8 @@ DirectionSet::DirectionSet(int level) : mLevel(level) {
         std::vector<Corners> next;
         next.reserve(level0.size() * 4);
         for (const Corners& t : level0)
-            for (const Corners& c : children(t)) next.push_back(c);
+            for (const Corners& c : children(t))
+                next.push_back(c);
         level0 = std::move(next);
     }
     mTriangleCorners = level0;
@@ -108,7 +113,8 @@ DirectionSet::DirectionSet(int level) : mLevel(level) {
             mCellParts[od.index].push_back({p, midA, g, midB, od.sign});
         }
     }
-    for (std::size_t i = 0; i < area.size(); ++i) mCellSolidAngle[i] = float(area[i]);
+    for (std::size_t i = 0; i < area.size(); ++i)
+        mCellSolidAngle[i] = float(area[i]);
 }
 
 float DirectionSet::solidAngleWeight(std::size_t i) const {
@@ -123,9 +129,12 @@ std::uint32_t DirectionSet::descend(const glm::vec3& d) const {
         const std::array<Corners, 4> c = children(t);
         const Corners& mid = c[3]; // (ab, bc, ca)
         int child = 3;
-        if (glm::dot(d, glm::cross(mid[2], mid[0])) < 0.f) child = 0;      // beyond ca-ab: a
-        else if (glm::dot(d, glm::cross(mid[0], mid[1])) < 0.f) child = 1; // beyond ab-bc: b
-        else if (glm::dot(d, glm::cross(mid[1], mid[2])) < 0.f) child = 2; // beyond bc-ca: c
+        if (glm::dot(d, glm::cross(mid[2], mid[0])) < 0.f)
+            child = 0; // beyond ca-ab: a
+        else if (glm::dot(d, glm::cross(mid[0], mid[1])) < 0.f)
+            child = 1; // beyond ab-bc: b
+        else if (glm::dot(d, glm::cross(mid[1], mid[2])) < 0.f)
+            child = 2; // beyond bc-ca: c
         t = c[child];
         index = index * 4 + std::uint32_t(child);
     }
@@ -144,7 +153,8 @@ DirectionTriangle DirectionSet::locate(const glm::vec3& direction) const {
     const glm::dvec3 dd(d), a(c[0]), b(c[1]), e(c[2]);
     double w[3] = {triple(dd, b, e), triple(a, dd, e), triple(a, b, dd)};
     double sum = 0.0;
-    for (double& x : w) sum += x = std::max(x, 0.0);
+    for (double& x : w)
+        sum += x = std::max(x, 0.0);
     DirectionTriangle out;
     for (int k = 0; k < 3; ++k) {
         out.corners[k] = mTriangles[t][k];
@@ -164,14 +174,16 @@ DirectionTriangle DirectionSet::locate(const glm::vec3& direction) const {
         if (x < 1e-9 * sum) x = 0.0;
         kept += x;
     }
-    for (int k = 0; k < 3; ++k) out.weights[k] = float(w[k] / kept);
+    for (int k = 0; k < 3; ++k)
+        out.weights[k] = float(w[k] / kept);
     return out;
 }
 
 DirectionSample DirectionSet::sampleCell(std::size_t i, float sign, std::mt19937& rng) const {
     const std::vector<CellPart>& parts = mCellParts[i];
     std::uniform_real_distribution<float> uniform(0.f, 1.f);
-    const std::size_t k = std::min(parts.size() - 1, std::size_t(uniform(rng) * float(parts.size())));
+    const std::size_t k =
+        std::min(parts.size() - 1, std::size_t(uniform(rng) * float(parts.size())));
     const CellPart& part = parts[k];
     // Two flat triangles of the part's quadrilateral, one chosen uniformly.
     const bool first = uniform(rng) < 0.5f;

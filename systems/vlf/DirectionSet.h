@@ -72,7 +72,9 @@ public:
     /// Index of the triangle that locate() finds (for tests against brute force).
     std::uint32_t locateTriangle(const glm::vec3& direction) const;
     /// The corners of triangle t.
-    const std::array<OrientedDirection, 3>& triangle(std::uint32_t t) const { return mTriangles[t]; }
+    const std::array<OrientedDirection, 3>& triangle(std::uint32_t t) const {
+        return mTriangles[t];
+    }
 
     /// A jittered direction in direction i's cell (seeded by the caller's generator), on the
     /// side of `sign * direction(i)`. solidAngle is the sample's quadrature weight (see

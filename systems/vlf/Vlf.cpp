@@ -69,10 +69,12 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     v.mCenter = b.center();
     v.mRadius = std::max(0.5f * glm::length(b.extent()) * 1.001f, 1e-6f);
     const std::size_t l = v.mDirections->size();
-    for (std::size_t i = 0; i < l; ++i) v.mFrames.push_back(makeSubfieldFrame(v.mDirections->direction(i)));
+    for (std::size_t i = 0; i < l; ++i)
+        v.mFrames.push_back(makeSubfieldFrame(v.mDirections->direction(i)));
 
     v.mFaces = scene.faces();
-    for (Face& f : v.mFaces) f.triangles.clear();
+    for (Face& f : v.mFaces)
+        f.triangles.clear();
 
     // Irradiance maps with texel coverage from 4 x 4 samples per texel.
     const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
@@ -103,8 +105,10 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
                          4.f; // in sub-sample units
             const glm::vec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
             const glm::vec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
-            const int x0 = std::max(0, int(std::floor(lo.x))), x1 = std::min(int(m.width * 4) - 1, int(hi.x));
-            const int y0 = std::max(0, int(std::floor(lo.y))), y1 = std::min(int(m.height * 4) - 1, int(hi.y));
+            const int x0 = std::max(0, int(std::floor(lo.x))),
+                      x1 = std::min(int(m.width * 4) - 1, int(hi.x));
+            const int y0 = std::max(0, int(std::floor(lo.y))),
+                      y1 = std::min(int(m.height * 4) - 1, int(hi.y));
             for (int y = y0; y <= y1; ++y)
                 for (int x = x0; x <= x1; ++x)
                     if (inside(q, glm::vec2(float(x) + 0.5f, float(y) + 0.5f)))
@@ -112,7 +116,8 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
         }
         for (std::size_t tx = 0; tx < std::size_t(m.width) * m.height; ++tx) {
             int n = 0;
-            for (int s = 0; s < 16; ++s) n += hits[tx * 16 + s];
+            for (int s = 0; s < 16; ++s)
+                n += hits[tx * 16 + s];
             v.mCoverage[m.firstTexel + tx] = float(n) / 16.f;
         }
     }
@@ -207,7 +212,8 @@ std::uint32_t Vlf::texelAt(std::uint32_t face, const glm::vec3& x) const {
 glm::vec3 Vlf::texelCenter(std::uint32_t face, std::uint32_t x, std::uint32_t y) const {
     const Face& f = mFaces[face];
     const FaceMap& m = mFaceMaps[face];
-    return f.origin + (float(x) + 0.5f) * m.texelU * f.axisU + (float(y) + 0.5f) * m.texelV * f.axisV;
+    return f.origin + (float(x) + 0.5f) * m.texelU * f.axisU +
+           (float(y) + 0.5f) * m.texelV * f.axisV;
 }
 
 std::int32_t Vlf::tileAt(std::size_t sf, std::size_t psf, int i, int j) const {
@@ -235,13 +241,16 @@ VlfMemory Vlf::memory() const {
     mem.tiles = mTileCount;
     mem.tileCells = mTileCount * std::size_t(m) * m;
     mem.diffuseTexels = mIrradiance.size();
-    const std::size_t index = mSlots.size() * sizeof(std::int32_t) + mBlocks.size() * sizeof(TileBlock) +
+    const std::size_t index = mSlots.size() * sizeof(std::int32_t) +
+                              mBlocks.size() * sizeof(TileBlock) +
                               mFaceMaps.size() * sizeof(FaceMap) + mCoverage.size() * sizeof(float);
-    mem.renderBytes = mem.tileCells * sizeof(glm::vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
+    mem.renderBytes =
+        mem.tileCells * sizeof(glm::vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
     // The bake adds, per cell: unshot, next and incident (RGB) plus the incident weight and the
     // incident total for mirrors (RGBA); per texel: unshot and next irradiance, and one
     // per-thread accumulation copy (counted once).
-    mem.bakeBytes = mem.renderBytes + mem.tileCells * (3 * sizeof(glm::vec3) + sizeof(float) + sizeof(glm::vec4)) +
+    mem.bakeBytes = mem.renderBytes +
+                    mem.tileCells * (3 * sizeof(glm::vec3) + sizeof(float) + sizeof(glm::vec4)) +
                     mem.diffuseTexels * 3 * sizeof(glm::vec3);
     return mem;
 }

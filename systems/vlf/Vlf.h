@@ -20,8 +20,12 @@ namespace qgi::vlf {
 struct TiledIndex {
     int s = 0, t = 0, u = 0, v = 0;
 };
-inline TiledIndex toTiled(int i, int j, int m) { return {i / m, j / m, i % m, j % m}; }
-inline glm::ivec2 toGlobal(const TiledIndex& x, int m) { return {x.s * m + x.u, x.t * m + x.v}; }
+inline TiledIndex toTiled(int i, int j, int m) {
+    return {i / m, j / m, i % m, j % m};
+}
+inline glm::ivec2 toGlobal(const TiledIndex& x, int m) {
+    return {x.s * m + x.u, x.t * m + x.v};
+}
 
 /// The irradiance map of one face: width x height texels of texelU x texelV metres tiling the
 /// face's bounding rectangle exactly (Face::origin, axisU, axisV), starting at `firstTexel` of
@@ -45,11 +49,11 @@ struct TileBlock {
 /// Memory of the structure (seed 002 section 1.7 of the digest): element counts and bytes.
 struct VlfMemory {
     std::size_t directions = 0;
-    std::size_t tiles = 0;          ///< allocated m x m tiles over all specular faces and PSFs
-    std::size_t tileCells = 0;      ///< tiles * m^2: directional elements
-    std::size_t diffuseTexels = 0;  ///< irradiance-map texels over all faces
-    std::size_t renderBytes = 0;    ///< what lookups keep: RGBA float per cell and texel, index
-    std::size_t bakeBytes = 0;      ///< peak during the bake: the bake's extra copies on top
+    std::size_t tiles = 0;         ///< allocated m x m tiles over all specular faces and PSFs
+    std::size_t tileCells = 0;     ///< tiles * m^2: directional elements
+    std::size_t diffuseTexels = 0; ///< irradiance-map texels over all faces
+    std::size_t renderBytes = 0;   ///< what lookups keep: RGBA float per cell and texel, index
+    std::size_t bakeBytes = 0;     ///< peak during the bake: the bake's extra copies on top
 };
 
 /** A baked Virtual Light Field (seed 002): the direction set, the subfield grids, per-face

@@ -70,7 +70,9 @@ public:
         for (int k = 1; k <= mSettings.iterations; ++k) {
             const auto ti = Clock::now();
             VlfIterationStats it = transportPass(k, local);
+            const auto tg = Clock::now();
             gatherSpecular();
+            it.gatherSeconds = since(tg);
             finishPass(it);
             it.seconds = since(ti);
             if (mSettings.progress)
@@ -114,7 +116,8 @@ private:
             for (int dx = -1; dx <= 1; ++dx) {
                 const int x2 = tx + dx, y2 = ty + dy;
                 if (x2 < 0 || y2 < 0 || x2 >= int(m.width) || y2 >= int(m.height)) continue;
-                const std::uint32_t u = m.firstTexel + std::uint32_t(y2) * m.width + std::uint32_t(x2);
+                const std::uint32_t u =
+                    m.firstTexel + std::uint32_t(y2) * m.width + std::uint32_t(x2);
                 if (cov[u] > bestCov) {
                     bestCov = cov[u];
                     best = u;
@@ -173,7 +176,8 @@ private:
                 }
                 // The dropped tail's weight goes to the kept part: the lobe keeps its albedo.
                 if (kept > 0.0)
-                    for (auto& entry : lobe) entry.second = float(entry.second * (all / kept));
+                    for (auto& entry : lobe)
+                        entry.second = float(entry.second * (all / kept));
             }
         });
     }
@@ -214,7 +218,8 @@ private:
                     if (mVlf.texelCoverage()[t] <= 0.f) continue;
                     const glm::vec3 p = mVlf.texelCenter(std::uint32_t(fi), x, y);
                     glm::vec3 E(0.f), from;
-                    for (const PunctualLight& light : lights) E += irradianceFrom(light, f, p, from);
+                    for (const PunctualLight& light : lights)
+                        E += irradianceFrom(light, f, p, from);
                     mUnshotE[t] = E;
                     mVlf.irradiance()[t] = E;
                 }
@@ -251,12 +256,14 @@ private:
                 const std::int32_t tile = mVlf.slots()[b.firstSlot + std::size_t(t) * b.sw + s];
                 if (tile < 0) continue;
                 for (int v = 0; v < m; ++v)
-                    for (int u = 0; u < m; ++u) fn(tile, (b.s0 + s) * m + u, (b.t0 + t) * m + v);
+                    for (int u = 0; u < m; ++u)
+                        fn(tile, (b.s0 + s) * m + u, (b.t0 + t) * m + v);
             }
     }
 
     // ---- transport --------------------------------------------------------------------------
-    /// Outgoing radiance of a sender crossing at x travelling along sigma * (subfield psf).
+    /// Outgoing radiance of a sender crossing at x travelling along sigma * direction(psf)
+    /// (roughly: jittered directions deviate within the cell).
     glm::vec3 sendRadiance(std::uint32_t face, const glm::vec3& x, std::size_t psf, float sigma,
                            int iteration) const {
         const Face& f = mVlf.faces()[face];
@@ -316,6 +323,9 @@ private:
             }
             const SubfieldFrame F = makeSubfieldFrame(d);
             d = F.n;
+            // A sample of an equator direction's cell may lie around the reversed direction:
+            // the tiles' sides are relative to the stored direction.
+            const float orient = glm::dot(d, mDirs.direction(psf)) >= 0.f ? 1.f : -1.f;
             const float lineFlux = mVlf.lineArea() * dOmega;
             for (int j = 0; j < N; ++j)
                 for (int i = 0; i < N; ++i) {
@@ -326,8 +336,8 @@ private:
                     }
                     const float u = -1.f + (float(i) + ju) * h, v = -1.f + (float(j) + jv) * h;
                     const glm::vec3 origin = mVlf.center() + R * (u * F.u + v * F.v - 1.01f * F.n);
-                    const std::size_t n =
-                        mScene.crossings(origin, d, 2.02f * R, cross.data(), kMaxCrossings, 1e-5f * R);
+                    const std::size_t n = mScene.crossings(origin, d, 2.02f * R, cross.data(),
+                                                           kMaxCrossings, 1e-5f * R);
                     ++acc.lines;
                     acc.crossings += n;
                     if (n == 0) continue;
@@ -339,30 +349,35 @@ private:
                     if (facing(0) < 0.f) {
                         if (env != glm::vec3(0.f)) {
                             acc.stats.fromEnvironment += glm::dvec3(env * lineFlux);
-                            receive(acc, cross[0].face, point(0), psf, 1.f, env, dOmega);
+                            receive(acc, cross[0].face, point(0), psf, orient, env, dOmega);
                         }
-                        const glm::vec3 L = sendRadiance(cross[0].face, point(0), psf, -1.f, iteration);
+                        const glm::vec3 L =
+                            sendRadiance(cross[0].face, point(0), psf, -orient, iteration);
                         acc.stats.escaped += glm::dvec3(L * lineFlux);
                     }
                     if (facing(n - 1) > 0.f) {
                         if (env != glm::vec3(0.f)) {
                             acc.stats.fromEnvironment += glm::dvec3(env * lineFlux);
-                            receive(acc, cross[n - 1].face, point(n - 1), psf, -1.f, env, dOmega);
+                            receive(acc, cross[n - 1].face, point(n - 1), psf, -orient, env,
+                                    dOmega);
                         }
-                        const glm::vec3 L = sendRadiance(cross[n - 1].face, point(n - 1), psf, 1.f, iteration);
+                        const glm::vec3 L =
+                            sendRadiance(cross[n - 1].face, point(n - 1), psf, orient, iteration);
                         acc.stats.escaped += glm::dvec3(L * lineFlux);
                     }
                     // Exchange pairs: a faces along +d, b against it.
                     for (std::size_t k = 0; k + 1 < n; ++k) {
                         if (!(facing(k) > 0.f && facing(k + 1) < 0.f)) continue;
                         const glm::vec3 xa = point(k), xb = point(k + 1);
-                        const glm::vec3 La = sendRadiance(cross[k].face, xa, psf, 1.f, iteration);
-                        const glm::vec3 Lb = sendRadiance(cross[k + 1].face, xb, psf, -1.f, iteration);
+                        const glm::vec3 La =
+                            sendRadiance(cross[k].face, xa, psf, orient, iteration);
+                        const glm::vec3 Lb =
+                            sendRadiance(cross[k + 1].face, xb, psf, -orient, iteration);
                         acc.stats.sent += glm::dvec3((La + Lb) * lineFlux);
                         if (La != glm::vec3(0.f) || mVlf.specularIndex(cross[k + 1].face) >= 0)
-                            receive(acc, cross[k + 1].face, xb, psf, 1.f, La, dOmega);
+                            receive(acc, cross[k + 1].face, xb, psf, orient, La, dOmega);
                         if (Lb != glm::vec3(0.f) || mVlf.specularIndex(cross[k].face) >= 0)
-                            receive(acc, cross[k].face, xa, psf, -1.f, Lb, dOmega);
+                            receive(acc, cross[k].face, xa, psf, -orient, Lb, dOmega);
                     }
                 }
         }
@@ -376,25 +391,27 @@ private:
         std::atomic<int> reported{0};
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 1),
                           [&](const tbb::blocked_range<std::size_t>& r) {
-            for (std::size_t c = r.begin(); c != r.end(); ++c) {
-                ChunkAccum& acc = chunks[c];
-                acc.irradiance.assign(mVlf.irradiance().size(), glm::vec3(0.f));
-                for (std::size_t psf = c; psf < l; psf += chunks.size()) {
-                    transportSubfield(psf, iteration, acc);
-                    const std::size_t now = ++done;
-                    const int tenth = int(now * 10 / l);
-                    int seen = reported.load();
-                    if (mSettings.progress && tenth > seen &&
-                        reported.compare_exchange_strong(seen, tenth))
-                        logInfo("VLF bake: iteration ", iteration, "/", mSettings.iterations, ": ",
-                                now, "/", l, " directions");
-                }
-            }
-        });
+                              for (std::size_t c = r.begin(); c != r.end(); ++c) {
+                                  ChunkAccum& acc = chunks[c];
+                                  acc.irradiance.assign(mVlf.irradiance().size(), glm::vec3(0.f));
+                                  for (std::size_t psf = c; psf < l; psf += chunks.size()) {
+                                      transportSubfield(psf, iteration, acc);
+                                      const std::size_t now = ++done;
+                                      const int tenth = int(now * 10 / l);
+                                      int seen = reported.load();
+                                      if (mSettings.progress && tenth > seen &&
+                                          reported.compare_exchange_strong(seen, tenth))
+                                          logInfo("VLF bake: iteration ", iteration, "/",
+                                                  mSettings.iterations, ": ", now, "/", l,
+                                                  " directions");
+                                  }
+                              }
+                          });
         VlfIterationStats stats;
         mReceived.assign(mVlf.irradiance().size(), glm::vec3(0.f));
         for (const ChunkAccum& acc : chunks) { // fixed order: deterministic sums
-            for (std::size_t t = 0; t < mReceived.size(); ++t) mReceived[t] += acc.irradiance[t];
+            for (std::size_t t = 0; t < mReceived.size(); ++t)
+                mReceived[t] += acc.irradiance[t];
             stats.sent += acc.stats.sent;
             stats.received += acc.stats.received;
             stats.escaped += acc.stats.escaped;
@@ -407,7 +424,8 @@ private:
             const FaceMap& m = mVlf.faceMaps()[fi];
             const double area = double(m.texelU) * m.texelV;
             for (std::uint32_t t = m.firstTexel; t < m.firstTexel + m.width * m.height; ++t) {
-                const glm::dvec3 flux = glm::dvec3(mReceived[t]) * area * double(mVlf.texelCoverage()[t]);
+                const glm::dvec3 flux =
+                    glm::dvec3(mReceived[t]) * area * double(mVlf.texelCoverage()[t]);
                 stats.deposited += flux;
                 stats.reflectedDiffuse += flux * glm::dvec3(mVlf.faces()[fi].diffuse);
             }
@@ -436,7 +454,8 @@ private:
                     glm::vec3 L(0.f);
                     if (f.isMirror()) {
                         const glm::vec3 from = 2.f * glm::dot(f.normal, o) * f.normal - o;
-                        const std::optional<glm::vec3> in = mVlf.lookupTiles(mIncidentAvg, face, x, from);
+                        const std::optional<glm::vec3> in =
+                            mVlf.lookupTiles(mIncidentAvg, face, x, from);
                         if (in) L = f.specular * *in;
                         // Render table of a mirror: the total incident light.
                         if (mIncidentAvg[c].w > 0.f) {
@@ -463,7 +482,8 @@ private:
     void finishPass(VlfIterationStats&) {
         if (mSettings.filterSigma > 0.f) filter(mReceived);
         std::vector<glm::vec3>& total = mVlf.irradiance();
-        for (std::size_t t = 0; t < total.size(); ++t) total[t] += mReceived[t];
+        for (std::size_t t = 0; t < total.size(); ++t)
+            total[t] += mReceived[t];
         mUnshotE.swap(mReceived);
         mUnshotL.swap(mNextL);
         std::fill(mNextL.begin(), mNextL.end(), glm::vec3(0.f));
@@ -508,10 +528,12 @@ private:
                         s += g * tmp[std::size_t(y2) * W + x];
                         w += g * tmpW[std::size_t(y2) * W + x];
                     }
-                    out[std::size_t(y) * W + x] = cov[at(x, y)] > 0.f && w > 0.f ? s / w : E[at(x, y)];
+                    out[std::size_t(y) * W + x] =
+                        cov[at(x, y)] > 0.f && w > 0.f ? s / w : E[at(x, y)];
                 }
             for (int y = 0; y < H; ++y)
-                for (int x = 0; x < W; ++x) E[at(x, y)] = out[std::size_t(y) * W + x];
+                for (int x = 0; x < W; ++x)
+                    E[at(x, y)] = out[std::size_t(y) * W + x];
         });
     }
 

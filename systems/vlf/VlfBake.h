@@ -12,9 +12,9 @@ namespace qgi::vlf {
 
 /// Flux bookkeeping of one propagation iteration, W (RGB, double precision sums).
 struct VlfIterationStats {
-    glm::dvec3 sent{0.0};        ///< leaving senders along every line that has a receiver
-    glm::dvec3 received{0.0};    ///< arriving at receivers (from senders and the environment)
-    glm::dvec3 escaped{0.0};     ///< leaving senders along lines with nothing beyond
+    glm::dvec3 sent{0.0};            ///< leaving senders along every line that has a receiver
+    glm::dvec3 received{0.0};        ///< arriving at receivers (from senders and the environment)
+    glm::dvec3 escaped{0.0};         ///< leaving senders along lines with nothing beyond
     glm::dvec3 fromEnvironment{0.0}; ///< arriving from the environment (first iteration only)
     /// Sum over texels of (received irradiance x texel area x coverage), before the filter:
     /// equals `received` when no deposit was lost.
@@ -22,6 +22,7 @@ struct VlfIterationStats {
     glm::dvec3 reflectedDiffuse{0.0}; ///< k_d x deposited: what the next iteration shoots
     std::size_t lostDeposits = 0;     ///< deposits with no covered texel nearby (dropped)
     double seconds = 0.0;
+    double gatherSeconds = 0.0; ///< of which the specular (mirror and glossy) gather
 };
 
 struct VlfBakeStats {

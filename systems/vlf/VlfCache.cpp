@@ -34,7 +34,8 @@ public:
     Reader(const std::vector<char>& b, const std::string& file) : bytes(b), path(file) {}
     template <typename T> T get() {
         static_assert(std::is_trivially_copyable_v<T>);
-        if (bytes.size() - pos < sizeof(T)) fail(path, ": VLF cache is corrupt (payload truncated)");
+        if (bytes.size() - pos < sizeof(T))
+            fail(path, ": VLF cache is corrupt (payload truncated)");
         T v;
         std::memcpy(&v, bytes.data() + pos, sizeof(T));
         pos += sizeof(T);

@@ -88,8 +88,10 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
             for (std::size_t i = 0; i + 2 < mesh.indices.size(); i += 3) {
                 Triangle t;
                 t.p0 = glm::vec3(world.matrix * glm::vec4(mesh.positions[mesh.indices[i]], 1.f));
-                t.p1 = glm::vec3(world.matrix * glm::vec4(mesh.positions[mesh.indices[i + 1]], 1.f));
-                t.p2 = glm::vec3(world.matrix * glm::vec4(mesh.positions[mesh.indices[i + 2]], 1.f));
+                t.p1 =
+                    glm::vec3(world.matrix * glm::vec4(mesh.positions[mesh.indices[i + 1]], 1.f));
+                t.p2 =
+                    glm::vec3(world.matrix * glm::vec4(mesh.positions[mesh.indices[i + 2]], 1.f));
                 if (!finite(t.p0) || !finite(t.p1) || !finite(t.p2))
                     fail(who(registry, e), ": a vertex is not finite in world space");
                 triangles.push_back(t);
@@ -117,8 +119,9 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
             lights.push_back(l);
         });
     const SceneInfo* info = registry.ctx().find<SceneInfo>();
-    auto scene = std::make_unique<VlfScene>(std::move(triangles), group, materials,
-                                            std::move(lights), info ? info->environment : glm::vec3(0.f));
+    auto scene =
+        std::make_unique<VlfScene>(std::move(triangles), group, materials, std::move(lights),
+                                   info ? info->environment : glm::vec3(0.f));
     scene->mEntities = std::move(entities);
     return scene;
 }
@@ -142,10 +145,9 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
         if (!(len > 1e-12f)) continue; // degenerate: no area, never hit
         const glm::vec3 n = c / len;
         const float offset = glm::dot(n, t.p0);
-        const auto key = std::make_tuple(group[i], int(std::lround(n.x * 1000.f)),
-                                         int(std::lround(n.y * 1000.f)),
-                                         int(std::lround(n.z * 1000.f)),
-                                         long(std::lround(offset * 1e4f)));
+        const auto key = std::make_tuple(
+            group[i], int(std::lround(n.x * 1000.f)), int(std::lround(n.y * 1000.f)),
+            int(std::lround(n.z * 1000.f)), long(std::lround(offset * 1e4f)));
         auto [it, added] = faceOf.try_emplace(key, std::uint32_t(mFaces.size()));
         if (added) {
             Face f;
@@ -186,7 +188,8 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
         mBounds.extend(t.p2);
     }
     Hasher h;
-    for (const Triangle& t : mTriangles) h.add(t);
+    for (const Triangle& t : mTriangles)
+        h.add(t);
     for (const Face& f : mFaces) {
         h.add(f.diffuse);
         h.add(f.emission);
@@ -194,7 +197,8 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
         h.add(f.phongExponent);
         h.add(std::uint64_t(f.triangles.size()));
     }
-    for (const PunctualLight& l : mLights) h.add(l);
+    for (const PunctualLight& l : mLights)
+        h.add(l);
     h.add(mEnvironment);
     mHash = h.value();
     buildEmbree();
@@ -214,7 +218,8 @@ void VlfScene::buildEmbree() {
         vertices[3 * i] = mTriangles[i].p0;
         vertices[3 * i + 1] = mTriangles[i].p1;
         vertices[3 * i + 2] = mTriangles[i].p2;
-        for (int k = 0; k < 3; ++k) indices[3 * i + k] = std::uint32_t(3 * i + k);
+        for (int k = 0; k < 3; ++k)
+            indices[3 * i + k] = std::uint32_t(3 * i + k);
     }
     rtcCommitGeometry(geometry.get());
     mScene = SceneHandle(rtcNewScene(device));
@@ -224,8 +229,7 @@ void VlfScene::buildEmbree() {
     rtcCommitScene(mScene.get());
 }
 
-Crossing VlfScene::firstHit(const glm::vec3& o, const glm::vec3& d, float tMin,
-                            float tMax) const {
+Crossing VlfScene::firstHit(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     RTCRayHit rh{};

@@ -14,7 +14,7 @@
 namespace qgi {
 class Registry;
 struct Material;
-}
+} // namespace qgi
 
 namespace qgi::vlf {
 
@@ -22,17 +22,17 @@ namespace qgi::vlf {
 /// The VLF stores light per face (thesis: planar convex polygons); a face's irradiance map lives
 /// in its plane frame (origin, axisU, axisV), metres.
 struct Face {
-    glm::vec3 normal{0.f, 1.f, 0.f}; ///< unit, world space, on the front (lit) side
-    float offset = 0.f;              ///< plane: dot(normal, x) = offset, metres
-    glm::vec3 origin{0.f};           ///< corner of the face's bounding rectangle in its plane
-    glm::vec3 axisU{1.f, 0.f, 0.f};  ///< unit, in the plane
-    glm::vec3 axisV{0.f, 0.f, 1.f};  ///< unit, in the plane, cross(axisU, axisV) = normal
-    float extentU = 0.f, extentV = 0.f; ///< size of the bounding rectangle, metres
-    float area = 0.f;                ///< sum of its triangle areas, m^2
-    glm::vec3 diffuse{0.f};          ///< k_d: diffuse albedo, linear RGB
-    glm::vec3 emission{0.f};         ///< emitted radiance, W/(m^2 sr)
-    glm::vec3 specular{0.f};         ///< k_s of the modified Phong lobe
-    float phongExponent = 0.f;       ///< n_s; 0: ideal mirror
+    glm::vec3 normal{0.f, 1.f, 0.f};      ///< unit, world space, on the front (lit) side
+    float offset = 0.f;                   ///< plane: dot(normal, x) = offset, metres
+    glm::vec3 origin{0.f};                ///< corner of the face's bounding rectangle in its plane
+    glm::vec3 axisU{1.f, 0.f, 0.f};       ///< unit, in the plane
+    glm::vec3 axisV{0.f, 0.f, 1.f};       ///< unit, in the plane, cross(axisU, axisV) = normal
+    float extentU = 0.f, extentV = 0.f;   ///< size of the bounding rectangle, metres
+    float area = 0.f;                     ///< sum of its triangle areas, m^2
+    glm::vec3 diffuse{0.f};               ///< k_d: diffuse albedo, linear RGB
+    glm::vec3 emission{0.f};              ///< emitted radiance, W/(m^2 sr)
+    glm::vec3 specular{0.f};              ///< k_s of the modified Phong lobe
+    float phongExponent = 0.f;            ///< n_s; 0: ideal mirror
     std::vector<std::uint32_t> triangles; ///< indices into VlfScene::triangles()
 
     bool isSpecular() const { return specular.x > 0.f || specular.y > 0.f || specular.z > 0.f; }
@@ -42,10 +42,10 @@ struct Face {
 /// A point or spot light, in world space, for the bake's direct-light pass.
 struct PunctualLight {
     glm::vec3 position{0.f};
-    glm::vec3 intensity{0.f};        ///< radiant intensity on the axis x colour, W/sr
-    glm::vec3 axis{0.f, 0.f, -1.f};  ///< spot: unit direction it shines along
-    float cosInner = -2.f;           ///< spot: full intensity where cos(angle) >= cosInner
-    float cosOuter = -2.f;           ///< spot: zero where cos(angle) <= cosOuter; -2: point
+    glm::vec3 intensity{0.f};       ///< radiant intensity on the axis x colour, W/sr
+    glm::vec3 axis{0.f, 0.f, -1.f}; ///< spot: unit direction it shines along
+    float cosInner = -2.f;          ///< spot: full intensity where cos(angle) >= cosInner
+    float cosOuter = -2.f;          ///< spot: zero where cos(angle) <= cosOuter; -2: point
     /// Radiant intensity towards unit direction `d` (from the light), W/sr.
     glm::vec3 intensityTowards(const glm::vec3& d) const;
 };
@@ -103,11 +103,10 @@ public:
     /// Every crossing of the segment origin + t * dir, t in [0, tMax] (dir unit), sorted by t;
     /// crossings closer than `merge` to the previous one are dropped (a shared edge hit
     /// twice). Writes at most `maxCrossings` (further ones are dropped). Returns the count.
-    std::size_t crossings(const glm::vec3& origin, const glm::vec3& dir, float tMax,
-                          Crossing* out, std::size_t maxCrossings, float merge) const;
+    std::size_t crossings(const glm::vec3& origin, const glm::vec3& dir, float tMax, Crossing* out,
+                          std::size_t maxCrossings, float merge) const;
     /// First crossing after tMin, or none (face = UINT32_MAX).
-    Crossing firstHit(const glm::vec3& origin, const glm::vec3& dir, float tMin,
-                      float tMax) const;
+    Crossing firstHit(const glm::vec3& origin, const glm::vec3& dir, float tMin, float tMax) const;
     /// Whether the open segment between a and b is blocked.
     bool occluded(const glm::vec3& a, const glm::vec3& b) const;
 

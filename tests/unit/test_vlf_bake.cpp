@@ -26,8 +26,9 @@ std::unique_ptr<VlfScene> roomWithBlock() {
     const auto rot = [&](float x, float y, float z) {
         return glm::vec3(c * x + s * z, y + 0.1f, -s * x + c * z);
     };
-    const glm::vec3 p[8] = {rot(-.3f, 0, -.3f), rot(.3f, 0, -.3f), rot(.3f, 0, .3f), rot(-.3f, 0, .3f),
-                            rot(-.3f, .8f, -.3f), rot(.3f, .8f, -.3f), rot(.3f, .8f, .3f), rot(-.3f, .8f, .3f)};
+    const glm::vec3 p[8] = {rot(-.3f, 0, -.3f), rot(.3f, 0, -.3f),    rot(.3f, 0, .3f),
+                            rot(-.3f, 0, .3f),  rot(-.3f, .8f, -.3f), rot(.3f, .8f, -.3f),
+                            rot(.3f, .8f, .3f), rot(-.3f, .8f, .3f)};
     b.quad(p[4], p[7], p[6], p[5], grey); // top, facing +y
     b.quad(p[0], p[1], p[2], p[3], grey); // bottom, facing -y
     b.quad(p[0], p[4], p[5], p[1], grey);
@@ -53,7 +54,8 @@ struct EmitterScene {
         const std::uint32_t floor = s.material(glm::vec3(0.5f));
         const std::uint32_t lamp = s.material(glm::vec3(0.f), glm::vec3(L));
         s.quad({-1.f, 0.f, -1.f}, {-1.f, 0.f, 1.f}, {1.f, 0.f, 1.f}, {1.f, 0.f, -1.f}, floor);
-        s.quad({-a / 2, c, -b / 2}, {a / 2, c, -b / 2}, {a / 2, c, b / 2}, {-a / 2, c, b / 2}, lamp);
+        s.quad({-a / 2, c, -b / 2}, {a / 2, c, -b / 2}, {a / 2, c, b / 2}, {-a / 2, c, b / 2},
+               lamp);
         return s.build();
     }
     /// Irradiance at floor point (x, 0, z): E = pi L F, F by inclusion-exclusion of the
@@ -62,8 +64,8 @@ struct EmitterScene {
         const auto corner = [&](double u, double v) {
             const double X = std::abs(u) / c, Y = std::abs(v) / c;
             const double sx = std::sqrt(1 + X * X), sy = std::sqrt(1 + Y * Y);
-            const double F = (X / sx * std::atan(Y / sx) + Y / sy * std::atan(X / sy)) /
-                             (2 * glm::pi<double>());
+            const double F =
+                (X / sx * std::atan(Y / sx) + Y / sy * std::atan(X / sy)) / (2 * glm::pi<double>());
             return (u < 0 ? -1 : 1) * (v < 0 ? -1 : 1) * F;
         };
         const double x0 = -a / 2 - x, x1 = a / 2 - x, z0 = -b / 2 - z, z1 = b / 2 - z;
@@ -76,7 +78,8 @@ struct EmitterScene {
         double sum = 0;
         for (int i = 0; i < 32; ++i)
             for (int j = 0; j < 32; ++j)
-                sum += irradiance(lo.x + (hi.x - lo.x) * (i + 0.5) / 32, lo.z + (hi.z - lo.z) * (j + 0.5) / 32);
+                sum += irradiance(lo.x + (hi.x - lo.x) * (i + 0.5) / 32,
+                                  lo.z + (hi.z - lo.z) * (j + 0.5) / 32);
         return sum / (32 * 32);
     }
 };
@@ -105,13 +108,16 @@ TEST(VlfBake, CrossingsAlternateInAClosedScene) {
     std::size_t lines = 0, withHits = 0;
     for (std::size_t psf = 0; psf < set.size(); ++psf)
         for (int sample = 0; sample < 2; ++sample) {
-            const glm::vec3 d = sample == 0 ? set.direction(psf) : set.sampleCell(psf, 1.f, rng).direction;
+            const glm::vec3 d =
+                sample == 0 ? set.direction(psf) : set.sampleCell(psf, 1.f, rng).direction;
             const SubfieldFrame F = makeSubfieldFrame(d);
             for (int j = 0; j < 32; ++j)
                 for (int i = 0; i < 32; ++i) {
-                    const float u = -1.f + (float(i) + 0.5f) / 16.f, v = -1.f + (float(j) + 0.5f) / 16.f;
+                    const float u = -1.f + (float(i) + 0.5f) / 16.f,
+                                v = -1.f + (float(j) + 0.5f) / 16.f;
                     const glm::vec3 o = centre + R * (u * F.u + v * F.v - 1.01f * F.n);
-                    const std::size_t n = scene->crossings(o, F.n, 2.02f * R, cross.data(), cross.size(), 1e-5f * R);
+                    const std::size_t n =
+                        scene->crossings(o, F.n, 2.02f * R, cross.data(), cross.size(), 1e-5f * R);
                     ++lines;
                     withHits += n > 0;
                     ASSERT_EQ(n % 2, 0u) << "psf " << psf << " line " << i << "," << j;
@@ -136,7 +142,8 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
     const std::uint32_t wall = b.material(glm::vec3(0.6f, 0.5f, 0.4f));
     const std::uint32_t lamp = b.material(glm::vec3(0.f), glm::vec3(5.f));
     b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true, [&](int, int) { return wall; });
-    b.quad({-0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, 0.2f}, {-0.2f, 1.99f, 0.2f}, lamp);
+    b.quad({-0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, 0.2f}, {-0.2f, 1.99f, 0.2f},
+           lamp);
     const auto scene = b.build();
     VlfSettings s;
     s.directionLevel = 2;
@@ -175,7 +182,8 @@ TEST(VlfBake, WhiteFurnaceGivesTheGeometricSeries) {
     const auto scene = furnace(Le, rho);
     const int K = 3;
     double expected = 0.0; // L_e * sum_{k=0..K} rho^k
-    for (int k = 0; k <= K; ++k) expected += Le * std::pow(rho, k);
+    for (int k = 0; k <= K; ++k)
+        expected += Le * std::pow(rho, k);
     // Independent seeds give independent unbiased estimates of each face's mean radiance.
     const int seeds = 16;
     std::vector<std::vector<double>> values(scene->faces().size());
@@ -194,8 +202,10 @@ TEST(VlfBake, WhiteFurnaceGivesTheGeometricSeries) {
     }
     for (std::size_t f = 0; f < values.size(); ++f) {
         double mean = 0, var = 0;
-        for (double x : values[f]) mean += x / seeds;
-        for (double x : values[f]) var += (x - mean) * (x - mean) / (seeds - 1);
+        for (double x : values[f])
+            mean += x / seeds;
+        for (double x : values[f])
+            var += (x - mean) * (x - mean) / (seeds - 1);
         const double se = std::sqrt(var / seeds);
         // Student t with 15 degrees of freedom: |t| > 4.5 has probability < 1e-3.
         EXPECT_NEAR(mean, expected, 4.5 * se + 1e-5 * expected) << "face " << f;
@@ -210,7 +220,8 @@ TEST(VlfBake, DiffusePointUnderARectangularEmitter) {
     ASSERT_GE(floor, 0);
     const int seeds = 8;
     // Texels near the centre and off to the side.
-    const std::array<glm::vec2, 3> probes{glm::vec2(0.f, 0.f), glm::vec2(0.35f, 0.1f), glm::vec2(-0.4f, -0.3f)};
+    const std::array<glm::vec2, 3> probes{glm::vec2(0.f, 0.f), glm::vec2(0.35f, 0.1f),
+                                          glm::vec2(-0.4f, -0.3f)};
     std::vector<std::vector<double>> values(probes.size());
     std::vector<double> truth(probes.size());
     for (int seed = 1; seed <= seeds; ++seed) {
@@ -230,7 +241,8 @@ TEST(VlfBake, DiffusePointUnderARectangularEmitter) {
             const glm::vec3 x(probes[p].x, 0.f, probes[p].y);
             const std::uint32_t t = v.texelAt(std::uint32_t(floor), x);
             values[p].push_back(v.irradiance()[t].x);
-            const std::uint32_t tx = (t - m.firstTexel) % m.width, ty = (t - m.firstTexel) / m.width;
+            const std::uint32_t tx = (t - m.firstTexel) % m.width,
+                                ty = (t - m.firstTexel) / m.width;
             const glm::vec3 c = v.texelCenter(std::uint32_t(floor), tx, ty);
             const glm::vec3 half = 0.5f * (m.texelU * f.axisU + m.texelV * f.axisV);
             truth[p] = es.texelMean(glm::min(c - half, c + half), glm::max(c - half, c + half));
@@ -238,8 +250,10 @@ TEST(VlfBake, DiffusePointUnderARectangularEmitter) {
     }
     for (std::size_t p = 0; p < probes.size(); ++p) {
         double mean = 0, var = 0;
-        for (double x : values[p]) mean += x / seeds;
-        for (double x : values[p]) var += (x - mean) * (x - mean) / (seeds - 1);
+        for (double x : values[p])
+            mean += x / seeds;
+        for (double x : values[p])
+            var += (x - mean) * (x - mean) / (seeds - 1);
         const double se = std::sqrt(var / seeds);
         // Student t, 7 degrees of freedom: |t| > 5.4 has probability < 1e-3.
         EXPECT_NEAR(mean, truth[p], 5.4 * se + 1e-5 * truth[p]) << "probe " << p;
@@ -272,7 +286,8 @@ TEST(VlfBake, DiffuseErrorFallsAsDirectionsGrow) {
             for (std::uint32_t tx = 0; tx < m.width; tx += 2) {
                 const glm::vec3 c = v.texelCenter(std::uint32_t(floor), tx, ty);
                 const glm::vec3 half = 0.5f * (m.texelU * f.axisU + m.texelV * f.axisV);
-                const double truth = es.texelMean(glm::min(c - half, c + half), glm::max(c - half, c + half));
+                const double truth =
+                    es.texelMean(glm::min(c - half, c + half), glm::max(c - half, c + half));
                 const double e = v.irradiance()[m.firstTexel + ty * m.width + tx].x - truth;
                 err2 += e * e;
                 ++n;
@@ -297,34 +312,37 @@ TEST(VlfBake, MirrorReturnsKsTimesWhatItReflects) {
         return one;
     });
     const auto scene = b.build();
-    VlfSettings s;
-    s.directionLevel = 3;
-    s.linesPerSide = 32;
-    s.tileSize = 8;
-    s.iterations = 1;
-    s.jitterSamples = 0;
-    s.filterSigma = 0.f;
-    const Vlf v = bakeVlf(*scene, s);
     const int floor = test::findFace(*scene, {0.f, 1.f, 0.f}, {0.f, 0.f, 0.f});
     ASSERT_GE(floor, 0);
-    // Points near the middle of the mirror, viewed so that the reflected ray meets the middle
-    // of the +x wall (value 3) or of the -x wall (value 1), far from every wall edge in
-    // angle and position: all 12 taps then see the same wall.
-    std::mt19937 rng(2);
-    std::uniform_real_distribution<float> u(-0.15f, 0.15f);
-    for (int k = 0; k < 50; ++k) {
-        const glm::vec3 x(u(rng), 0.f, u(rng));
-        for (float wallX : {1.f, -1.f}) {
-            const glm::vec3 target(wallX, 1.f + u(rng), u(rng));
-            const glm::vec3 from = glm::normalize(target - x);        // the light comes from there
-            const glm::vec3 toViewer(-from.x, from.y, -from.z);        // mirrored about the normal
-            const glm::vec3 L = v.specularRadiance(std::uint32_t(floor), x, toViewer);
-            const float expected = ks * (wallX > 0.f ? 3.f : 1.f);
-            EXPECT_NEAR(L.x, expected, 1e-5f * expected) << k;
+    // Fixed and jittered directions (jittered samples of equator cells run reversed).
+    for (int jitter : {0, 2}) {
+        VlfSettings s;
+        s.directionLevel = 3;
+        s.linesPerSide = 32;
+        s.tileSize = 8;
+        s.iterations = 1;
+        s.jitterSamples = jitter;
+        s.filterSigma = 0.f;
+        const Vlf v = bakeVlf(*scene, s);
+        // Points near the middle of the mirror, viewed so that the reflected ray meets the middle
+        // of the +x wall (value 3) or of the -x wall (value 1), far from every wall edge in
+        // angle and position: all 12 taps then see the same wall.
+        std::mt19937 rng(2);
+        std::uniform_real_distribution<float> u(-0.15f, 0.15f);
+        for (int k = 0; k < 50; ++k) {
+            const glm::vec3 x(u(rng), 0.f, u(rng));
+            for (float wallX : {1.f, -1.f}) {
+                const glm::vec3 target(wallX, 1.f + u(rng), u(rng));
+                const glm::vec3 from = glm::normalize(target - x);  // the light comes from there
+                const glm::vec3 toViewer(-from.x, from.y, -from.z); // mirrored about the normal
+                const glm::vec3 L = v.specularRadiance(std::uint32_t(floor), x, toViewer);
+                const float expected = ks * (wallX > 0.f ? 3.f : 1.f);
+                EXPECT_NEAR(L.x, expected, 1e-5f * expected) << k << " jitter " << jitter;
+            }
         }
+        // The diffuse part of a pure mirror is its emission (none).
+        EXPECT_EQ(v.diffuseRadiance(std::uint32_t(floor), glm::vec3(0.f)), glm::vec3(0.f));
     }
-    // The diffuse part of a pure mirror is its emission (none).
-    EXPECT_EQ(v.diffuseRadiance(std::uint32_t(floor), glm::vec3(0.f)), glm::vec3(0.f));
 }
 
 TEST(VlfBake, LookupAtAStoredDirectionAndCellCentreIsExact) {
@@ -357,7 +375,8 @@ TEST(VlfBake, LookupAtAStoredDirectionAndCellCentreIsExact) {
                 const std::int64_t c = v.cellIndex(0, psf, i, j);
                 if (c < 0 || v.tiles()[std::size_t(c)].w <= 0.f) continue;
                 const float h = v.cellWidth();
-                const glm::vec3 p = v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
+                const glm::vec3 p =
+                    v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
                 const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, d);
                 const glm::vec3 x = p + t * d;
                 const glm::vec3 got = v.specularRadiance(face, x, d);
@@ -401,12 +420,15 @@ TEST(VlfBake, GlossyReflectionConservesEnergy) {
                 // Cells whose centre line meets the floor inside the room.
                 const float h = v.cellWidth();
                 const glm::vec3 d = float(bl.side) * v.directions().direction(psf);
-                const glm::vec3 p = v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
+                const glm::vec3 p =
+                    v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
                 const glm::vec3 x = p + (-p.y / d.y) * d;
                 if (std::abs(x.x) > 1.f || std::abs(x.z) > 1.f) continue;
-                reflected += double(v.tiles()[std::size_t(c)].x) * v.lineArea() * v.directions().cellSolidAngle(psf);
+                reflected += double(v.tiles()[std::size_t(c)].x) * v.lineArea() *
+                             v.directions().cellSolidAngle(psf);
                 incident += 1.0 * v.lineArea() * v.directions().cellSolidAngle(psf);
-                EXPECT_LE(v.tiles()[std::size_t(c)].x, ks * 1.001f); // <= k_s * L (lobe albedo <= 1)
+                EXPECT_LE(v.tiles()[std::size_t(c)].x,
+                          ks * 1.001f); // <= k_s * L (lobe albedo <= 1)
             }
     }
     ASSERT_GT(incident, 0.0);

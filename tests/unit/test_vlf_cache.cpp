@@ -1,7 +1,17 @@
-// The VLF cache file: round trip, stale and corrupt files rejected with a clear message.
+// The VLF cache file: round trip, stale and corrupt files rejected with a clear message; and
+// VlfSystem, which bakes or loads it and publishes the VlfField resource.
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/ecs/Registry.h"
+#include "systems/frame/FrameSchedule.h"
 #include "systems/vlf/VlfBake.h"
 #include "systems/vlf/VlfCache.h"
+#include "systems/vlf/VlfField.h"
+#include "systems/vlf/VlfSystem.h"
 #include "test_vlf_scenes.h"
 
 #include <gtest/gtest.h>
@@ -90,7 +100,8 @@ TEST(VlfCache, RoundTripKeepsEveryValue) {
             const Face& face = a.faces()[f];
             const glm::vec3 x = face.origin + (0.5f + 0.5f * u(rng)) * face.extentU * face.axisU +
                                 (0.5f + 0.5f * u(rng)) * face.extentV * face.axisV;
-            const glm::vec3 view = glm::normalize(face.normal + 0.5f * glm::vec3(u(rng), u(rng), u(rng)));
+            const glm::vec3 view =
+                glm::normalize(face.normal + 0.5f * glm::vec3(u(rng), u(rng), u(rng)));
             EXPECT_EQ(a.radiance(f, x, view), b.radiance(f, x, view));
         }
     std::filesystem::remove(path);
@@ -162,4 +173,96 @@ TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
     EXPECT_EQ(first.tiles(), third.tiles());
     EXPECT_NO_THROW(VlfCache::load(path, vlfKey(*scene, s))); // the rebuilt file is good
     std::filesystem::remove(path);
+}
+
+// ---- VlfSystem: the registry's static meshes in, the VlfField resource out ------------------
+
+namespace {
+
+Entity addQuad(Registry& world, glm::vec3 corner, glm::vec3 u, glm::vec3 v, const Material& m,
+               bool mobile = false) {
+    Mesh mesh;
+    const glm::vec3 n = glm::normalize(glm::cross(u, v));
+    for (const glm::vec3& p : {corner, corner + u, corner + u + v, corner + v}) {
+        mesh.positions.push_back(p);
+        mesh.normals.push_back(n);
+    }
+    mesh.indices = {0, 1, 2, 0, 2, 3};
+    const Entity e = world.create();
+    world.emplace<Mesh>(e, mesh);
+    world.emplace<WorldTransform>(e);
+    world.emplace<Material>(e, m);
+    if (mobile)
+        world.emplace<MobileMesh>(e);
+    else
+        world.emplace<StaticMesh>(e);
+    return e;
+}
+
+} // namespace
+
+TEST(VlfSystem, PublishesTheFieldAndMapsSpecularFacesToEntities) {
+    Registry world;
+    Material lamp;
+    lamp.baseColor = glm::vec3(0.f);
+    lamp.emission = glm::vec3(2.f);
+    Material glossy;
+    glossy.baseColor = glm::vec3(0.3f);
+    glossy.specular = glm::vec3(0.5f);
+    glossy.phongExponent = 20.f;
+    Material metal; // glTF metallic-roughness only: read as a mirror
+    metal.metallic = 1.f;
+    metal.roughness = 0.f;
+    const Entity floor = addQuad(world, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, glossy);
+    addQuad(world, {-1, 1, -1}, {2, 0, 0}, {0, 0, 2}, lamp); // ceiling light, facing down
+    const Entity wall = addQuad(world, {-1, 0, -1}, {2, 0, 0}, {0, 1, 0}, metal);
+    addQuad(world, {-0.2f, 0.5f, 0.2f}, {0.4f, 0, 0}, {0, 0, -0.4f}, glossy,
+            true); // mobile: not baked
+
+    VlfSystemSettings settings;
+    settings.bake = small();
+    settings.cacheFile = tempFile("system.vlf");
+    std::filesystem::remove(settings.cacheFile);
+    VlfSystem(settings).build(world);
+    ASSERT_TRUE(world.ctx().contains<VlfField>());
+    const VlfField& field = world.ctx().get<VlfField>();
+    EXPECT_EQ(field.vlf.faces().size(), 3u); // the mobile quad is not part of the field
+    ASSERT_EQ(field.specularFaces.size(), 2u);
+    ASSERT_TRUE(field.specularFaces.contains(floor));
+    ASSERT_TRUE(field.specularFaces.contains(wall));
+    const vlf::Face& wallFace = field.vlf.faces()[field.specularFaces.at(wall).front()];
+    EXPECT_TRUE(wallFace.isMirror());
+    EXPECT_EQ(wallFace.specular, glm::vec3(1.f));
+    EXPECT_EQ(wallFace.diffuse, glm::vec3(0.f));
+    // The floor reflects the lamp: its glossy tiles hold light.
+    const std::uint32_t f = field.specularFaces.at(floor).front();
+    EXPECT_GT(
+        field.vlf.specularRadiance(f, {0.f, 0.f, 0.f}, glm::normalize(glm::vec3(0.2f, 1.f, 0.1f)))
+            .x,
+        0.f);
+    EXPECT_TRUE(std::filesystem::exists(settings.cacheFile));
+
+    // Through the frame schedule (no renderer): loaded from the cache this time.
+    Registry again;
+    addQuad(again, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, glossy);
+    addQuad(again, {-1, 1, -1}, {2, 0, 0}, {0, 0, 2}, lamp);
+    addQuad(again, {-1, 0, -1}, {2, 0, 0}, {0, 1, 0}, metal);
+    addQuad(again, {-0.2f, 0.5f, 0.2f}, {0.4f, 0, 0}, {0, 0, -0.4f}, glossy, true);
+    FrameSettings frame;
+    frame.photons.reset();
+    frame.render.reset();
+    frame.vlf = settings;
+    FrameSchedule schedule(again, frame);
+    ASSERT_TRUE(again.ctx().contains<VlfField>());
+    EXPECT_EQ(again.ctx().get<VlfField>().vlf.tiles(), field.vlf.tiles());
+    std::filesystem::remove(settings.cacheFile);
+}
+
+TEST(VlfSystem, EmptySceneIsAClearError) {
+    Registry world;
+    VlfSystemSettings settings;
+    settings.bake = small();
+    EXPECT_THROW(VlfSystem(settings).build(world), Error);
+    settings.bake.tileSize = 5;
+    EXPECT_THROW(VlfSystem{settings}, Error);
 }

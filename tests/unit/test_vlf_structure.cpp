@@ -1,7 +1,7 @@
 // The VLF structure: direction set, triangle lookup, cells, subfield frames, tiling, memory.
+#include "runtime/core/Error.h"
 #include "systems/vlf/DirectionSet.h"
 #include "systems/vlf/Vlf.h"
-#include "runtime/core/Error.h"
 #include "test_vlf_scenes.h"
 
 #include <glm/gtc/constants.hpp>
@@ -18,14 +18,16 @@ namespace {
 glm::vec3 randomDirection(std::mt19937& rng) {
     std::normal_distribution<float> g;
     glm::vec3 d;
-    do d = glm::vec3(g(rng), g(rng), g(rng));
+    do
+        d = glm::vec3(g(rng), g(rng), g(rng));
     while (glm::length(d) < 1e-3f);
     return glm::normalize(d);
 }
 
 /// Whether d lies in the (positively oriented) spherical triangle with corner vectors c.
 bool contains(const std::array<glm::vec3, 3>& c, const glm::vec3& d, float eps) {
-    return glm::dot(d, glm::cross(c[0], c[1])) >= -eps && glm::dot(d, glm::cross(c[1], c[2])) >= -eps &&
+    return glm::dot(d, glm::cross(c[0], c[1])) >= -eps &&
+           glm::dot(d, glm::cross(c[1], c[2])) >= -eps &&
            glm::dot(d, glm::cross(c[2], c[0])) >= -eps;
 }
 
@@ -94,7 +96,8 @@ TEST(VlfDirections, LookupMatchesBruteForce) {
             for (std::uint32_t t = 0; t < set.triangleCount(); ++t)
                 anyContains |= contains(corners(set, t), up, 1e-6f);
             ASSERT_TRUE(anyContains);
-            ASSERT_TRUE(contains(corners(set, found), up, 1e-6f)) << "level " << level << " query " << q;
+            ASSERT_TRUE(contains(corners(set, found), up, 1e-6f))
+                << "level " << level << " query " << q;
             const DirectionTriangle tri = set.locate(d);
             float sum = 0.f;
             glm::vec3 chord(0.f);
@@ -151,7 +154,8 @@ TEST(VlfFrames, OrthonormalRightHanded) {
     const DirectionSet set(4);
     std::mt19937 rng(3);
     std::vector<glm::vec3> dirs = set.directions();
-    for (int k = 0; k < 1000; ++k) dirs.push_back(randomDirection(rng));
+    for (int k = 0; k < 1000; ++k)
+        dirs.push_back(randomDirection(rng));
     for (const glm::vec3& d : dirs) {
         const SubfieldFrame f = makeSubfieldFrame(d);
         EXPECT_NEAR(glm::length(f.u), 1.f, 1e-5f);
@@ -188,7 +192,8 @@ std::unique_ptr<VlfScene> glossyRoom() {
     const std::uint32_t glossy = b.material(glm::vec3(0.2f), glm::vec3(0.f), glm::vec3(0.5f), 20.f);
     b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true,
           [&](int axis, int side) { return axis == 1 && side == 0 ? glossy : wall; });
-    b.quad({-0.3f, 0.5f, -0.2f}, {0.4f, 0.7f, -0.3f}, {0.3f, 0.9f, 0.4f}, {-0.4f, 0.7f, 0.5f}, glossy);
+    b.quad({-0.3f, 0.5f, -0.2f}, {0.4f, 0.7f, -0.3f}, {0.3f, 0.9f, 0.4f}, {-0.4f, 0.7f, 0.5f},
+           glossy);
     return b.build();
 }
 
@@ -227,7 +232,8 @@ TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
                         projected.push_back(q);
                         const int i = int(std::floor(q.x)), j = int(std::floor(q.y));
                         EXPECT_GE(v.cellIndex(sf, psf, i, j), 0) << psf;
-                        const int bi = int(std::floor(q.x - 0.5f)), bj = int(std::floor(q.y - 0.5f));
+                        const int bi = int(std::floor(q.x - 0.5f)),
+                                  bj = int(std::floor(q.y - 0.5f));
                         for (int dj = 0; dj < 2; ++dj)
                             for (int di = 0; di < 2; ++di)
                                 if (bi + di >= 0 && bj + dj >= 0 && bi + di < N && bj + dj < N) {
@@ -239,8 +245,10 @@ TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
             for (int t = 0; t < b.tw; ++t)
                 for (int sx = 0; sx < b.sw; ++sx) {
                     if (v.slots()[b.firstSlot + std::size_t(t) * b.sw + sx] < 0) continue;
-                    const float x0 = float((b.s0 + sx) * m) - 1.5f, x1 = float((b.s0 + sx + 1) * m) + 1.5f;
-                    const float y0 = float((b.t0 + t) * m) - 1.5f, y1 = float((b.t0 + t + 1) * m) + 1.5f;
+                    const float x0 = float((b.s0 + sx) * m) - 1.5f,
+                                x1 = float((b.s0 + sx + 1) * m) + 1.5f;
+                    const float y0 = float((b.t0 + t) * m) - 1.5f,
+                                y1 = float((b.t0 + t + 1) * m) + 1.5f;
                     bool near = false;
                     for (const glm::vec2& q : projected)
                         near |= q.x >= x0 && q.x <= x1 && q.y >= y0 && q.y <= y1;
@@ -258,7 +266,8 @@ TEST(VlfStructure, ProjectionOfTheBoundsFitsThePlane) {
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(0.f, 1.f);
     for (int k = 0; k < 2000; ++k) {
-        const glm::vec3 p = scene->bounds().min + glm::vec3(u(rng), u(rng), u(rng)) * scene->bounds().extent();
+        const glm::vec3 p =
+            scene->bounds().min + glm::vec3(u(rng), u(rng), u(rng)) * scene->bounds().extent();
         const std::size_t psf = std::size_t(k) % v.directions().size();
         const glm::vec2 q = v.project(psf, p);
         EXPECT_LE(std::abs(q.x), 1.f);
@@ -283,7 +292,8 @@ TEST(VlfStructure, MemoryIsAccounted) {
     EXPECT_EQ(mem.tileCells, mem.tiles * 16);
     EXPECT_EQ(mem.tileCells, v.tiles().size());
     std::size_t texels = 0;
-    for (const FaceMap& m : v.faceMaps()) texels += std::size_t(m.width) * m.height;
+    for (const FaceMap& m : v.faceMaps())
+        texels += std::size_t(m.width) * m.height;
     EXPECT_EQ(mem.diffuseTexels, texels);
     // Rendering keeps RGBA float per cell and RGB float per texel, plus the index.
     EXPECT_GE(mem.renderBytes, mem.tileCells * 16 + texels * 12);
@@ -304,6 +314,13 @@ TEST(VlfStructure, BadSettingsAreRejected) {
     s = {};
     s.iterations = 0;
     EXPECT_THROW(Vlf::allocate(*scene, s), Error);
+    s = {};
+    s.directionLevel = 6;
+    s.linesPerSide = 4096;
+    EXPECT_THROW(validate(s), Error); // 1.4e11 lines per iteration: refused, not attempted
+    s = {};
+    s.filterSigma = -1.f;
+    EXPECT_THROW(validate(s), Error);
     test::VlfSceneBuilder empty;
     EXPECT_THROW(empty.build(), Error);
 }
