@@ -42,14 +42,26 @@ void ensureParentDirectory(const std::filesystem::path& base) {
     if (base.has_parent_path()) std::filesystem::create_directories(base.parent_path());
 }
 
-/// Whether a static mesh has a glossy or mirror material (as the VLF reads it).
-bool hasSpecularStatics(const Registry& registry) {
+/// `--vlf auto`: on when the static scene has glossy or mirror faces, but not more than 256 of
+/// them. The VLF stores light per planar face, so a curved glossy mesh (every triangle its own
+/// face, tiles in every direction) makes a large, slow field: that needs `--vlf on`.
+bool wantVlf(const Registry& registry) {
     bool any = false;
-    registry.view<const StaticMesh, const Material>().each([&](const StaticMesh&, const Material& m) {
-        const vlf::VlfScene::Material vm = vlf::VlfScene::fromComponent(m);
-        any |= vm.specular != glm::vec3(0.f);
-    });
-    return any;
+    registry.view<const StaticMesh, const Material>().each(
+        [&](const StaticMesh&, const Material& m) {
+            any |= vlf::VlfScene::fromComponent(m).specular != glm::vec3(0.f);
+        });
+    if (!any) return false;
+    const auto scene = vlf::VlfScene::fromRegistry(registry);
+    std::size_t specular = 0;
+    for (const vlf::Face& f : scene->faces())
+        specular += f.isSpecular();
+    if (specular > 256) {
+        logInfo("VLF off: ", specular, " glossy or mirror faces (curved glossy meshes); ",
+                "--vlf on bakes them anyway");
+        return false;
+    }
+    return true;
 }
 
 } // namespace
@@ -91,7 +103,7 @@ int runDemo(const DemoOptions& options) {
     } else {
         frameSettings.photons.reset();
     }
-    if (options.vlf == "on" || (options.vlf == "auto" && hasSpecularStatics(world))) {
+    if (options.vlf == "on" || (options.vlf == "auto" && wantVlf(world))) {
         VlfSystemSettings vlf;
         vlf.bake.directionLevel = options.vlfLevel;
         vlf.bake.linesPerSide = options.vlfLines;

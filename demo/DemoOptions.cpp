@@ -75,7 +75,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "er eg eb (W/m^2) and a mobile flag per vertex");
     app.add_option("--vlf", o.vlf,
                    "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
-                   "the scene has such surfaces)")
+                   "the static scene has 1 to 256 glossy or mirror faces)")
         ->check(CLI::IsMember({"on", "off", "auto"}));
     app.add_option("--vlf-level", o.vlfLevel, "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
         ->check(CLI::Range(1, 6));

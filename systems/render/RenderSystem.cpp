@@ -150,7 +150,7 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
 const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
     const VlfField* field = registry.ctx().find<VlfField>();
     if (!field) return nullptr;
-    if (field == mVlfSource) return &mVlf;
+    if (field == mVlfSource && field->vlf.key() == mVlfKey) return &mVlf;
     const vlf::Vlf& v = field->vlf;
     const vlf::DirectionSet& dirs = v.directions();
     VlfGpuTables t;
@@ -181,6 +181,7 @@ const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
     t.cells = v.tiles();
     mVlf = std::move(t);
     mVlfSource = field;
+    mVlfKey = v.key();
     return &mVlf;
 }
 

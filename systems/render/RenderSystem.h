@@ -70,6 +70,7 @@ private:
     bool mWarnedTexture = false;
     VlfGpuTables mVlf;
     const void* mVlfSource = nullptr; ///< the VlfField the tables were built from
+    std::uint64_t mVlfKey = 0;        ///< and its bake key
 };
 
 } // namespace qgi

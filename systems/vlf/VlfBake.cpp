@@ -441,39 +441,54 @@ private:
             mIncidentAvg[c] = a.w > 0.f ? glm::vec4(glm::vec3(a) / a.w, 1.f) : glm::vec4(0.f);
         }
         const int m = mVlf.tileSize();
+        struct GatherCell {
+            std::size_t index;
+            glm::vec3 x, L;
+        };
         tbb::parallel_for(std::size_t(0), mDirs.size(), [&](std::size_t j) {
+            std::vector<GatherCell> cells;
             for (std::size_t sf = 0; sf < mVlf.specularFaceCount(); ++sf) {
                 const std::uint32_t face = mVlf.specularFace(sf);
                 const Face& f = mVlf.faces()[face];
                 const TileBlock& b = mVlf.block(sf, j);
                 if (b.side == 0) continue;
                 const glm::vec3 o = float(b.side) * mDirs.direction(j);
-                forEachCell(b, [&](std::int32_t tile, int i, int jj) {
-                    const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
-                    const glm::vec3 x = cellPoint(f, j, i, jj);
-                    glm::vec3 L(0.f);
-                    if (f.isMirror()) {
+                if (f.isMirror()) {
+                    forEachCell(b, [&](std::int32_t tile, int i, int jj) {
+                        const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
+                        const glm::vec3 x = cellPoint(f, j, i, jj);
                         const glm::vec3 from = 2.f * glm::dot(f.normal, o) * f.normal - o;
                         const std::optional<glm::vec3> in =
                             mVlf.lookupTiles(mIncidentAvg, face, x, from);
-                        if (in) L = f.specular * *in;
+                        mNextL[c] = in ? f.specular * *in : glm::vec3(0.f);
                         // Render table of a mirror: the total incident light.
                         if (mIncidentAvg[c].w > 0.f) {
                             glm::vec4& r = mVlf.tiles()[c];
                             r = glm::vec4(glm::vec3(r) + glm::vec3(mIncidentAvg[c]), 1.f);
                         }
-                    } else {
-                        for (const auto& [i2, w] : mLobes[sf * mDirs.size() + j]) {
-                            float valid = 0.f;
-                            const glm::vec3 in = mVlf.sampleCells(mIncidentAvg, sf, i2, x, valid);
-                            if (valid > 0.f) L += w * in;
-                        }
-                        L *= f.specular;
-                        glm::vec4& r = mVlf.tiles()[c];
-                        r = glm::vec4(glm::vec3(r) + L, 1.f);
-                    }
-                    mNextL[c] = L;
+                    });
+                    continue;
+                }
+                // Glossy: lobe entry by lobe entry over all the block's cells, so that the
+                // incident cells of one subfield are read in order (each cell still sums
+                // its lobe in the same order).
+                cells.clear();
+                forEachCell(b, [&](std::int32_t tile, int i, int jj) {
+                    const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
+                    cells.push_back({c, cellPoint(f, j, i, jj), glm::vec3(0.f)});
                 });
+                for (const auto& [i2, w] : mLobes[sf * mDirs.size() + j])
+                    for (GatherCell& cell : cells) {
+                        float valid = 0.f;
+                        const glm::vec3 in = mVlf.sampleCells(mIncidentAvg, sf, i2, cell.x, valid);
+                        if (valid > 0.f) cell.L += w * in;
+                    }
+                for (const GatherCell& cell : cells) {
+                    const glm::vec3 L = cell.L * f.specular;
+                    glm::vec4& r = mVlf.tiles()[cell.index];
+                    r = glm::vec4(glm::vec3(r) + L, 1.f);
+                    mNextL[cell.index] = L;
+                }
             }
         });
     }

@@ -55,9 +55,12 @@ void Bake(benchmark::State& state) {
     state.counters["renderMB"] = double(mem.renderBytes) / 1e6;
     state.counters["bakeMB"] = double(mem.bakeBytes) / 1e6;
     state.counters["directS"] = stats.directSeconds;
-    double iterations = 0.0;
-    for (const auto& it : stats.iterations)
+    double iterations = 0.0, gather = 0.0;
+    for (const auto& it : stats.iterations) {
         iterations += it.seconds;
+        gather += it.gatherSeconds;
+    }
+    state.counters["gatherS"] = gather / double(stats.iterations.size());
     state.counters["iterationS"] = iterations / double(stats.iterations.size());
     state.counters["linesPerS"] = double(stats.lines) / iterations;
 }
