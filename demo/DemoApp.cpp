@@ -12,6 +12,7 @@
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneLoader.h"
 #include "systems/frame/FrameSchedule.h"
+#include "systems/sh_probes/AvatarShExport.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -78,6 +79,8 @@ int runDemo(const DemoOptions& options) {
     } else {
         frameSettings.photons.reset();
     }
+    frameSettings.probes->hybrid = options.mode == "hybrid";
+    frameSettings.probes->seed = options.seed;
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();
     render.height = window.height();
@@ -129,6 +132,11 @@ int runDemo(const DemoOptions& options) {
         ensureParentDirectory(*options.exportIrradiance);
         exportVertexIrradiance(world, *options.exportIrradiance);
         logInfo("wrote ", *options.exportIrradiance);
+    }
+    if (options.exportAvatars) {
+        ensureParentDirectory(*options.exportAvatars);
+        exportAvatarSh(world, *options.exportAvatars);
+        logInfo("wrote ", *options.exportAvatars);
     }
     if (options.profile) {
         ensureParentDirectory(*options.profile);

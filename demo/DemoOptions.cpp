@@ -72,6 +72,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--export-irradiance", o.exportIrradiance,
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
                    "er eg eb (W/m^2) and a mobile flag per vertex");
+    app.add_option("--export-avatars", o.exportAvatars,
+                   "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
+                   "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
+                   "real basis over world x, y, z)");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
 
     try {

@@ -27,6 +27,7 @@ struct DemoOptions {
     std::optional<std::string> profile;    ///< base path: writes .json (trace) and .csv
     std::optional<std::string> exportScene; ///< .gltf or .glb path, written after loading
     std::optional<std::string> exportIrradiance; ///< .ply path, written after the last frame
+    std::optional<std::string> exportAvatars;    ///< .csv path: avatars' SH after the last frame
     bool quiet = false;
 };
 
