@@ -49,7 +49,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "plane), impact (impact count) or photonmap (k-nearest photon map)")
         ->check(CLI::IsMember({"detp", "impact", "photonmap"}));
     app.add_option("--disc-radius", o.discRadius,
-                   "DETP disc radius in metres (0: half the scene's mesh edge bound)")
+                   "DETP disc radius in metres (0: the scene default, half its mesh edge bound, "
+                   "widened where photons are scarce for the scene's area)")
         ->check(CLI::Range(0.f, 100.f));
     app.add_flag("--full-recompute", o.fullRecompute,
                  "Re-shoot every photon and re-estimate every vertex each frame (the baseline "

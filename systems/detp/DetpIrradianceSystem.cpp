@@ -13,6 +13,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -46,15 +47,6 @@ bool reachesBox(const PhotonSegments& segments, std::uint32_t s, float tail, con
     return true;
 }
 
-/// Every live segment of the store, path by path: a re-traced path leaves garbage behind in
-/// the segment array.
-void listAllSegments(const PhotonStore& store, std::vector<std::uint32_t>& out) {
-    out.clear();
-    for (const PhotonPath& path : store.paths)
-        for (std::uint32_t k = 0; k < path.count; ++k)
-            out.push_back(path.first + k);
-}
-
 } // namespace
 
 DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSettings(settings) {
@@ -64,19 +56,22 @@ DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSett
 DetpIrradianceSystem::~DetpIrradianceSystem() = default;
 
 void DetpIrradianceSystem::build(Registry& registry) {
+    RayScene* rayScene = registry.ctx().find<RayScene>();
+    if (!rayScene) fail("DETP: the registry has no RayScene (its Embree device hosts the discs)");
+
+    ReceiverSet receivers;
+    receivers.build(registry);
     float radius = mSettings.discRadius;
     if (radius == 0.f) {
         const SceneInfo* info = registry.ctx().find<SceneInfo>();
         if (!info)
             fail("DETP: DetpSettings.discRadius is 0 (scene default) but the registry has no "
                  "SceneInfo to scale it from");
-        radius = defaultDiscRadius(*info);
+        double area = 0.0;
+        for (const float a : receivers.triangleAreas())
+            area += double(a);
+        radius = defaultDiscRadius(*info, area, mSettings.photonCount);
     }
-    RayScene* rayScene = registry.ctx().find<RayScene>();
-    if (!rayScene) fail("DETP: the registry has no RayScene (its Embree device hosts the discs)");
-
-    ReceiverSet receivers;
-    receivers.build(registry);
     auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
     const std::uint32_t staticCount = receivers.staticVertexCount();
     staticDiscs->build(receivers.positions().first(staticCount),
@@ -116,6 +111,9 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     const PhotonStore* store = registry.ctx().find<PhotonStore>();
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
     if (!store || !delta) return;
+    mSkipsDirect.assign(store->lights.size(), 0);
+    for (std::size_t l = 0; l < store->lights.size(); ++l)
+        mSkipsDirect[l] = mSettings.hybrid && store->lights[l].punctual;
     collectMovedMobiles(registry, *delta);
     const bool full = delta->full || mNeedsFull;
     mNeedsFull = false;
@@ -160,13 +158,19 @@ void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const P
     }
 }
 
-std::span<const std::uint32_t> DetpIrradianceSystem::sequence(std::size_t count) {
-    if (mSequence.size() < count) {
-        const std::size_t from = mSequence.size();
-        mSequence.resize(count);
-        std::iota(mSequence.begin() + std::ptrdiff_t(from), mSequence.end(), std::uint32_t(from));
-    }
-    return std::span<const std::uint32_t>(mSequence).first(count);
+bool DetpIrradianceSystem::counted(const PhotonSegments& segments, std::size_t s,
+                                   std::uint16_t light) const {
+    // A path naming a light the store does not list is treated as a punctual light's.
+    return segments.bounce[s] != 0 || !mSettings.hybrid ||
+           (light < mSkipsDirect.size() && !mSkipsDirect[light]);
+}
+
+void DetpIrradianceSystem::listCountedSegments(const PhotonStore& store,
+                                               std::vector<std::uint32_t>& out) const {
+    out.clear();
+    for (const PhotonPath& path : store.paths)
+        for (std::uint32_t k = 0; k < path.count; ++k)
+            if (counted(store.segments, path.first + k, path.light)) out.push_back(path.first + k);
 }
 
 // ---- DETP ---------------------------------------------------------------------------------
@@ -178,8 +182,8 @@ void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t first
                                            bool incremental) {
     for (std::size_t begin = 0; begin < indices.size(); begin += kBatchSize) {
         const std::size_t count = std::min(kBatchSize, indices.size() - begin);
-        discs.collectCrossings(segments, indices.subspan(begin, count), mSettings.hybrid,
-                               mCrossings, beyond.empty() ? beyond : beyond.subspan(begin, count));
+        discs.collectCrossings(segments, indices.subspan(begin, count), mCrossings,
+                               beyond.empty() ? beyond : beyond.subspan(begin, count));
         mStats.crossings += mCrossings.size();
         for (const DiscCrossing& c : mCrossings) {
             const std::uint32_t v = firstVertex + c.disc;
@@ -221,7 +225,8 @@ void DetpIrradianceSystem::estimateMobile(const Registry& registry, const Photon
     const auto addPath = [&](std::uint32_t p) {
         const PhotonPath& path = store.paths[p];
         for (std::uint32_t k = 0; k < path.count; ++k)
-            if (reachesBox(store.segments, path.first + k, tail, box))
+            if (counted(store.segments, path.first + k, path.light) &&
+                reachesBox(store.segments, path.first + k, tail, box))
                 mSegmentList.push_back(path.first + k);
     };
     if (const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>()) {
@@ -243,7 +248,7 @@ void DetpIrradianceSystem::estimateMobile(const Registry& registry, const Photon
         mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
 }
 
-void DetpIrradianceSystem::splitDelta(const PhotonDelta& delta) {
+void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelta& delta) {
     QGI_ASSERT(delta.oldFirst.size() == delta.paths.size() + 1 &&
                    delta.newFirst.size() == delta.paths.size() + 1,
                "PhotonDelta: oldFirst and newFirst hold one entry per path, plus one");
@@ -261,6 +266,10 @@ void DetpIrradianceSystem::splitDelta(const PhotonDelta& delta) {
     for (std::size_t i = 0; i < delta.paths.size(); ++i) {
         std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
         const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
+        // Not counted (hybrid mode, a punctual light's first segment): skipped on both sides.
+        const std::uint16_t light = store.paths[delta.paths[i]].light;
+        if (o < oldEnd && !counted(before, o, light)) ++o;
+        if (n < newEnd && !counted(after, n, light)) ++n;
         // The two heads are one ray stopped at different lengths: the crossings of the shorter
         // one are also the longer one's and cancel exactly, so only the longer one's crossings
         // beyond the shorter one's end are applied.
@@ -295,7 +304,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     if (full) {
         std::fill(mPowerSum.begin(), mPowerSum.end(), glm::dvec3(0.0));
         std::fill(mUpdateCount.begin(), mUpdateCount.end(), 0u);
-        listAllSegments(store, mSegmentList);
+        listCountedSegments(store, mSegmentList);
         accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
         for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
             mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
@@ -305,10 +314,11 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         return;
     }
 
+    const auto start = std::chrono::steady_clock::now();
     mTouched.clear();
     if (!delta.paths.empty()) {
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
-        splitDelta(delta);
+        splitDelta(store, delta);
         for (const DeltaPart& part : mDeltaParts)
             accumulateDiscs(*mStaticDiscs, 0, *part.segments, part.indices, part.beyond, part.sign,
                             true);
@@ -337,6 +347,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);
     mStats.verticesWritten = mTouched.size();
+    const auto moved = std::chrono::steady_clock::now();
+    mStats.deltaMs = std::chrono::duration<double, std::milli>(moved - start).count();
 
     for (const std::uint32_t r : mMoved) {
         estimateMobile(registry, store, r);
@@ -344,6 +356,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mStats.verticesWritten += receivers[r].vertexCount;
     }
     mStats.movedMobiles = mMoved.size();
+    mStats.mobileMs =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - moved).count();
 }
 
 // ---- impact count -------------------------------------------------------------------------
@@ -351,8 +365,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
 void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& store,
                                          const PhotonDelta& delta, bool full) {
     if (full) {
-        mImpacts.reset(mReceivers, mSettings.hybrid);
-        listAllSegments(store, mSegmentList);
+        mImpacts.reset(mReceivers);
+        listCountedSegments(store, mSegmentList);
         mImpacts.accumulate(mReceivers, store.segments, mSegmentList, 1.0);
         mImpacts.takeTouchedVertices(mTouched); // forgotten: every vertex is published below
         for (std::uint32_t v = 0; v < mReceivers.vertexCount(); ++v)
@@ -362,11 +376,16 @@ void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& 
     }
     if (delta.paths.empty()) return; // rigid mobiles keep their triangles' areas: no change
     mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
-    const auto indices = sequence(std::max(delta.oldSegments.size(), delta.newSegments.size()));
-    mImpacts.accumulate(mReceivers, delta.oldSegments, indices.first(delta.oldSegments.size()),
-                        -1.0);
-    mImpacts.accumulate(mReceivers, delta.newSegments, indices.first(delta.newSegments.size()),
-                        1.0);
+    for (const bool before : {true, false}) {
+        const PhotonSegments& segments = before ? delta.oldSegments : delta.newSegments;
+        const std::vector<std::uint32_t>& first = before ? delta.oldFirst : delta.newFirst;
+        mSegmentList.clear();
+        for (std::size_t i = 0; i < delta.paths.size(); ++i)
+            for (std::uint32_t s = first[i]; s < first[i + 1]; ++s)
+                if (counted(segments, s, store.paths[delta.paths[i]].light))
+                    mSegmentList.push_back(s);
+        mImpacts.accumulate(mReceivers, segments, mSegmentList, before ? -1.0 : 1.0);
+    }
     if (mImpacts.maxUpdates() >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
     mImpacts.takeTouchedVertices(mTouched);
     for (const std::uint32_t v : mTouched)
@@ -403,7 +422,7 @@ void DetpIrradianceSystem::updatePhotonMap(Registry& registry, const PhotonStore
                 const std::uint32_t s = path.first + k;
                 const PhotonSegments& segments = store.segments;
                 if (segments.hitEntity[s].isNull() || !std::isfinite(segments.length[s]) ||
-                    (mSettings.hybrid && segments.bounce[s] == 0))
+                    !counted(segments, s, path.light))
                     continue;
                 photons.push_back({segments.origin[s] + segments.length[s] * segments.direction[s],
                                    segments.power[s], segments.direction[s]});

@@ -56,7 +56,10 @@ struct PhotonSegments;
  *     depends on the whole set), so any change to the ray set rebuilds the tree from every
  *     stored hit and re-estimates every vertex; a mobile that moved without changing the
  *     ray set is re-estimated alone. That full cost every frame is the point of comparing.
- *  Hybrid mode skips segments that leave a light (bounce 0) in all three.
+ *  Hybrid mode skips the segments that leave a punctual light (bounce 0 of a path whose
+ *  PhotonLight::punctual is set) in all three: the renderer draws that light with its shadow
+ *  maps. The first segments of emissive surfaces' photons still count, so an area light's
+ *  direct light (which the renderer cannot draw) comes from photons in both modes.
  *
  *  Reads:  ctx<const PhotonStore>, ctx<const PhotonDelta>, ctx<const PhotonPathGrid> (when
  *          present), const WorldTransform (and its change list), const MobileMesh;
@@ -74,6 +77,8 @@ public:
         std::size_t candidateSegments = 0; ///< their segments that reach the mobile, traced
         std::size_t crossings = 0;         ///< (segment, disc) pairs applied
         std::size_t verticesWritten = 0;
+        double deltaMs = 0;  ///< wall-clock: the delta applied to static and unmoved vertices
+        double mobileMs = 0; ///< wall-clock: moved mobiles re-estimated in full
     };
 
     /// Throws qgi::Error for settings out of range (see validate()).
@@ -100,11 +105,16 @@ private:
     void collectMovedMobiles(const Registry& registry, const PhotonDelta& delta);
     Aabb discBounds(std::uint32_t receiver) const;
     float crossingTail() const;
-    std::span<const std::uint32_t> sequence(std::size_t count);
 
     void updateDetp(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
                     bool full);
-    void splitDelta(const PhotonDelta& delta);
+    void splitDelta(const PhotonStore& store, const PhotonDelta& delta);
+    /// Whether segment s of a path from `light` counts: not in hybrid mode when it is a
+    /// punctual light's first segment (the renderer draws that light).
+    bool counted(const PhotonSegments& segments, std::size_t s, std::uint16_t light) const;
+    /// Every live segment of the store that counts, path by path (re-traced paths leave
+    /// garbage behind in the segment array).
+    void listCountedSegments(const PhotonStore& store, std::vector<std::uint32_t>& out) const;
     void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
                          const PhotonSegments& segments, std::span<const std::uint32_t> indices,
                          std::span<const float> beyond, double sign, bool incremental);
@@ -146,8 +156,8 @@ private:
     std::vector<float> mBeyondList;
     std::vector<std::uint32_t> mMoved;  ///< receiver indices of mobiles that moved
     std::vector<std::uint8_t> mIsMoved; ///< per receiver
+    std::vector<std::uint8_t> mSkipsDirect; ///< per store light: its first segments do not count
     std::vector<std::uint32_t> mSegmentList;
-    std::vector<std::uint32_t> mSequence; ///< 0, 1, 2, ...
     std::vector<std::uint32_t> mCandidatePaths;
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;

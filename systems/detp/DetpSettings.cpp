@@ -4,7 +4,9 @@
 #include "runtime/scene/SceneInfo.h"
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 namespace qgi {
@@ -28,15 +30,22 @@ std::string_view irradianceEstimatorName(IrradianceEstimator estimator) {
     return "?";
 }
 
-float defaultDiscRadius(const SceneInfo& info) {
-    if (info.maxEdgeLength > 0.f && std::isfinite(info.maxEdgeLength))
-        return 0.5f * info.maxEdgeLength;
-    const float diagonal = info.bounds.empty() ? 0.f : glm::length(info.bounds.extent());
-    if (!(diagonal > 0.f) || !std::isfinite(diagonal))
-        fail("SceneInfo of '", info.name,
-             "': no maxEdgeLength and empty bounds, so there is no default DETP disc radius "
-             "(set DetpSettings.discRadius)");
-    return 0.01f * diagonal;
+float defaultDiscRadius(const SceneInfo& info, double area, std::uint32_t photons) {
+    float radius = 0.f;
+    if (info.maxEdgeLength > 0.f && std::isfinite(info.maxEdgeLength)) {
+        radius = 0.5f * info.maxEdgeLength;
+    } else {
+        const float diagonal = info.bounds.empty() ? 0.f : glm::length(info.bounds.extent());
+        if (!(diagonal > 0.f) || !std::isfinite(diagonal))
+            fail("SceneInfo of '", info.name,
+                 "': no maxEdgeLength and empty bounds, so there is no default DETP disc radius "
+                 "(set DetpSettings.discRadius)");
+        radius = 0.01f * diagonal;
+    }
+    if (photons > 0 && area > 0.0 && std::isfinite(area))
+        radius = std::max(radius, float(std::sqrt(double(kDefaultDiscLandings) * area /
+                                                  (glm::pi<double>() * double(photons)))));
+    return radius;
 }
 
 void validate(const DetpSettings& settings) {

@@ -21,12 +21,16 @@ std::string_view irradianceEstimatorName(IrradianceEstimator estimator);
 
 struct DetpSettings {
     IrradianceEstimator estimator = IrradianceEstimator::Detp;
-    /// Hybrid mode: the renderer draws the direct light of punctual lights, so segments that
-    /// leave a light (bounce 0) are not counted and photons carry only the light of later
-    /// bounces. Photon mode (false) counts every segment: all light comes from photons.
+    /// Hybrid mode: the renderer draws the direct light of punctual lights (point, spot,
+    /// directional), so the segments that leave one (bounce 0) are not counted and their photons
+    /// carry only the light of later bounces. Emissive surfaces' photons count in full: the
+    /// renderer does not draw area lights. Photon mode (false) counts every segment.
     bool hybrid = false;
-    /// DETP disc radius r, metres. 0: the scene default, defaultDiscRadius(SceneInfo).
+    /// DETP disc radius r, metres. 0: the scene default, defaultDiscRadius().
     float discRadius = 0.f;
+    /// The photon count the default radius is chosen for (PhotonSettings::photonCount; the
+    /// frame schedule fills it in). 0: the mesh-based rule alone.
+    std::uint32_t photonCount = 0;
     /// Photon map: k, the number of nearest hit points per estimate.
     std::uint32_t photonMapNeighbours = 50;
     /// Photon map: the search stops growing at this radius, metres; where fewer than k hit points
@@ -43,16 +47,24 @@ struct DetpSettings {
 /// found wherever a DETP disc would count about 3 or more segments.
 inline constexpr float kPhotonMapRadiusPerDisc = 4.f;
 
-/// The default DETP disc radius: half the scene's mesh refinement bound
-/// (SceneInfo::maxEdgeLength), so a disc covers about a vertex's own share of the surface.
-/// That is the seed's reference setting (r = 0.01 over 0.02 m triangles) and the size at which
-/// it found disc indexing fastest ("about the triangle edge length"). The cost of an update
-/// grows with the discs a segment crosses, about 4 r^2 / maxEdgeLength^2 of them here: on the
-/// cornell box, r = maxEdgeLength crosses 7.8 per segment at 2.4x the cost of r = maxEdgeLength / 2
-/// (2 per segment), for half the noise. A scene loaded without refinement falls back to 1% of
-/// its bounds diagonal (the seed's reference, 0.01 of a unit scene). Throws qgi::Error when the
-/// scene has neither (empty bounds).
-float defaultDiscRadius(const SceneInfo& info);
+/// Expected photon landings per disc the default radius aims for when photons are scarce:
+/// with about two counted segments per landing that is a relative noise near 1/sqrt(128), 9%.
+inline constexpr float kDefaultDiscLandings = 64.f;
+
+/// The default DETP disc radius, the larger of two rules:
+///  - half the scene's mesh refinement bound (SceneInfo::maxEdgeLength), so a disc covers about
+///    a vertex's own share of the surface. That is the seed's reference setting (r = 0.01 over
+///    0.02 m triangles) and the size at which it found disc indexing fastest ("about the
+///    triangle edge length"). A scene loaded without refinement falls back to 1% of its bounds
+///    diagonal (the seed's reference, 0.01 of a unit scene).
+///  - with `photons` > 0 and the receivers' total surface area `area` (m^2), the radius at which
+///    photons spread evenly over every surface would land kDefaultDiscLandings times per disc:
+///    sqrt(64 area / (pi photons)). Large scenes lit by few photons get wider discs (less
+///    noise, more smoothing); the cornell box at 500k photons or more keeps r = 0.01.
+/// The cost of an update grows with the discs a segment crosses (r^2): on the cornell box,
+/// doubling r crosses 3.9x the discs at 2.4x the time, for half the noise. Throws qgi::Error
+/// when the scene has neither an edge bound nor bounds.
+float defaultDiscRadius(const SceneInfo& info, double area = 0.0, std::uint32_t photons = 0);
 
 /// Throws qgi::Error naming the first field of `settings` that is out of range.
 void validate(const DetpSettings& settings);

@@ -29,7 +29,6 @@ struct DiscIndex::QueryContext {
     const std::uint32_t* indices = nullptr;
     const float* beyond = nullptr; ///< per index, or null: whole segments
     std::size_t count = 0;
-    bool skipDirect = false;
     std::vector<std::uint64_t>* pairs = nullptr; // the chunk's output
 };
 
@@ -131,7 +130,6 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
 
     for (std::size_t k = begin; k < end; ++k) {
         const std::uint32_t s = query.indices[k];
-        if (query.skipDirect && segments.bounce[s] == 0) continue;
         const glm::vec3& d = segments.direction[s];
         const glm::vec3 origin = segments.origin[s] - slack * d;
         RTCRay ray;
@@ -157,7 +155,7 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
 }
 
 void DiscIndex::collectCrossings(const PhotonSegments& segments,
-                                 std::span<const std::uint32_t> indices, bool skipDirect,
+                                 std::span<const std::uint32_t> indices,
                                  std::vector<DiscCrossing>& out, std::span<const float> beyond) {
     QGI_ASSERT(beyond.empty() || beyond.size() == indices.size(), "one length per index");
     out.clear();
@@ -172,7 +170,6 @@ void DiscIndex::collectCrossings(const PhotonSegments& segments,
     query.indices = indices.data();
     query.beyond = beyond.empty() ? nullptr : beyond.data();
     query.count = indices.size();
-    query.skipDirect = skipDirect;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                           for (std::size_t c = range.begin(); c != range.end(); ++c)

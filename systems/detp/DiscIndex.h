@@ -60,12 +60,11 @@ public:
     void move(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals);
 
     /// Every pair (segment, disc) such that segment `indices[k]` of `segments` crosses the disc,
-    /// in the order described in the class comment; `out` is overwritten. With `skipDirect`,
-    /// segments that leave a light (bounce 0) are left out (hybrid mode). `beyond`, when not
+    /// in the order described in the class comment; `out` is overwritten. `beyond`, when not
     /// empty, holds one length per index: segment indices[k] then counts only the discs it
     /// crosses and a copy of it cut at length beyond[k] does not (-inf: the whole segment).
     void collectCrossings(const PhotonSegments& segments, std::span<const std::uint32_t> indices,
-                          bool skipDirect, std::vector<DiscCrossing>& out,
+                          std::vector<DiscCrossing>& out,
                           std::span<const float> beyond = {});
 
     std::size_t size() const { return mCount; }

@@ -8,8 +8,7 @@
 
 namespace qgi {
 
-void ImpactCounter::reset(const ReceiverSet& receivers, bool skipDirect) {
-    mSkipDirect = skipDirect;
+void ImpactCounter::reset(const ReceiverSet& receivers) {
     const std::span<const glm::uvec3> triangles = receivers.triangles();
     const std::size_t vertexCount = receivers.vertexCount();
     mTriangles.assign(triangles.begin(), triangles.end());
@@ -48,7 +47,7 @@ void ImpactCounter::accumulate(const ReceiverSet& receivers, const PhotonSegment
     std::int64_t lastReceiver = -1;
     for (const std::uint32_t s : indices) {
         const Entity hit = segments.hitEntity[s];
-        if (hit.isNull() || (mSkipDirect && segments.bounce[s] == 0)) continue;
+        if (hit.isNull()) continue;
         if (hit != lastEntity) { // consecutive segments often land on the same mesh
             lastEntity = hit;
             lastReceiver = receivers.find(hit);

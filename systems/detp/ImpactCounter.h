@@ -22,8 +22,8 @@ struct PhotonSegments;
 class ImpactCounter {
 public:
     /// Sizes the per-triangle sums for `receivers` (triangles, areas, adjacency) and zeroes
-    /// them. With `skipDirect` (hybrid mode) segments that leave a light are not counted.
-    void reset(const ReceiverSet& receivers, bool skipDirect);
+    /// them.
+    void reset(const ReceiverSet& receivers);
 
     /// Adds `sign` x power of every segment indices[k] of `segments` that hit a receiver
     /// triangle. Sequential, in index order: the same calls give bit-identical sums.
@@ -43,7 +43,6 @@ public:
     std::uint32_t maxUpdates() const { return mMaxUpdates; }
 
 private:
-    bool mSkipDirect = false;
     std::vector<glm::uvec3> mTriangles; ///< global vertex ids
     std::vector<glm::dvec3> mTrianglePower;
     std::vector<std::uint32_t> mUpdateCount; ///< per triangle, additions since reset()

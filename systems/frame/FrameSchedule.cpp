@@ -14,7 +14,9 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
     }
     if (settings.photons) {
         mPhotons = std::make_unique<PhotonUpdateSystem>(*settings.photons);
-        mIrradiance = std::make_unique<DetpIrradianceSystem>(settings.irradiance);
+        DetpSettings irradiance = settings.irradiance;
+        if (irradiance.photonCount == 0) irradiance.photonCount = settings.photons->photonCount;
+        mIrradiance = std::make_unique<DetpIrradianceSystem>(irradiance);
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.irradiance");
         mIrradiance->build(registry);
     }

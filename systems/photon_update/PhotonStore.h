@@ -53,6 +53,9 @@ struct PhotonLight {
     Entity entity;
     glm::vec3 power{0.f}; ///< W emitted, linear RGB
     std::uint32_t photonCount = 0;
+    /// A point, spot or directional light: the renderer draws its direct light in hybrid mode,
+    /// so its photons' first segments are not counted there. An emissive surface's are.
+    bool punctual = false;
 };
 
 /** World resource: the stored photon ray set (seed 000 section 2.2).

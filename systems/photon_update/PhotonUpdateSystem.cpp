@@ -16,6 +16,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -26,6 +27,12 @@ constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); //
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
 constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 changed paths
+// reuseLandedPaths: a re-cast segment lands where it did within this fraction of the scene
+// box's diagonal (the rounding of a ray mapped into a translated instance is far below it).
+constexpr float kLandingTolerance = 1e-6f;
+// Two triangles of a mobile are one plane when their unit normals differ by less than this.
+constexpr float kFacetTolerance = 1e-5f;
+constexpr std::uint32_t kSettled = std::numeric_limits<std::uint32_t>::max();
 
 glm::vec3 albedoOf(const Material* material) {
     const glm::vec3 albedo = material ? material->baseColor : Material{}.baseColor;
@@ -116,7 +123,23 @@ bool testBit(const std::vector<std::uint64_t>& bits, std::uint32_t i) {
     return (bits[i >> 6] >> (i & 63)) & 1;
 }
 
+/// Milliseconds since `start`; restarts it.
+double lap(std::chrono::steady_clock::time_point& start) {
+    const auto now = std::chrono::steady_clock::now();
+    const double ms = std::chrono::duration<double, std::milli>(now - start).count();
+    start = now;
+    return ms;
+}
+
 } // namespace
+
+bool PhotonUpdateSystem::Mobile::sameFacet(std::uint32_t a, std::uint32_t b) const {
+    if (a == b) return true;
+    if (a >= facetNormals.size() || b >= facetNormals.size()) return false;
+    const glm::vec3 d = facetNormals[a] - facetNormals[b];
+    return glm::dot(facetNormals[a], facetNormals[a]) > 0.f &&
+           glm::dot(d, d) < kFacetTolerance * kFacetTolerance;
+}
 
 PhotonUpdateSystem::PhotonUpdateSystem(const PhotonSettings& settings) : mSettings(settings) {
     validatePhotonSettings(settings);
@@ -155,10 +178,16 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         return;
     }
 
+    auto clock = std::chrono::steady_clock::now();
     scheduleReshoots();
+    mRelabels.clear();
     findAffectedPaths(*scene, store, grid);
+    for (const Relabel& r : mRelabels)
+        store.segments.hitPrimitive[r.segment] = r.primitive;
+    mStats.findMs = lap(clock);
     if (!mJobs.empty()) {
         retrace(*scene, store, delta);
+        mStats.traceMs = lap(clock);
         grid.markChanged(store, delta.paths);
         const std::size_t live = store.segments.size() - mGarbage;
         if (double(mGarbage) > double(mSettings.compactionFraction) * double(live)) {
@@ -171,6 +200,7 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     // would change again anyway.
     mStats.reindexedPaths =
         grid.refresh(store, mSettings.gridRefreshBudget, store.pathCount() / kIdleChangedRatio);
+    mStats.gridMs = lap(clock);
 }
 
 bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store) {
@@ -221,9 +251,17 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
     registry.view<const MobileMesh, const Mesh>().each(
         [&](Entity e, const MobileMesh&, const Mesh& mesh) {
             if (!scene.isMobile(e)) return;
-            Mobile mobile{e, {}, scene.mobilePose(e)};
+            Mobile mobile{e, {}, scene.mobilePose(e), {}};
             for (const glm::vec3& p : mesh.positions)
                 mobile.objectBounds.extend(p);
+            mobile.facetNormals.reserve(mesh.indices.size() / 3);
+            for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+                const glm::vec3& a = mesh.positions[mesh.indices[t]];
+                const glm::vec3 n = glm::cross(mesh.positions[mesh.indices[t + 1]] - a,
+                                               mesh.positions[mesh.indices[t + 2]] - a);
+                const float length = glm::length(n);
+                mobile.facetNormals.push_back(length > 0.f ? n / length : glm::vec3(0.f));
+            }
             mSceneBox.extend(transformBox(mobile.objectBounds, mobile.pose));
             mMobileIndex.emplace(e, mMobiles.size());
             mMobiles.push_back(mobile);
@@ -264,7 +302,8 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     store.paths.clear();
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
-        store.lights.push_back({e.entity, e.power, e.photonCount});
+        store.lights.push_back(
+            {e.entity, e.power, e.photonCount, e.kind != EmitterKind::Surface});
         store.emittedPower += e.power;
         store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
     }
@@ -301,7 +340,8 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
         if (pose == mobile.pose) continue; // also skips an entity listed twice
         mMoved.push_back({e, pose, glm::inverse(pose), widened(mobile.objectBounds),
                           widened(transformBox(mobile.objectBounds, mobile.pose)),
-                          widened(transformBox(mobile.objectBounds, pose))});
+                          widened(transformBox(mobile.objectBounds, pose)),
+                          glm::mat3(pose) == glm::mat3(mobile.pose)});
         mobile.pose = pose;
         delta.movedMobiles.push_back(e);
     }
@@ -354,35 +394,15 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     grid.pathsOverlapping(mQueryBoxes, mCandidates);
     mFirstAffected.resize(mCandidates.size());
 
-    // The first segment that hit a moved mobile at its old pose (its recorded hit), or that
-    // crosses one at its new pose; -1 when the path is untouched or is being re-shot anyway.
-    const PhotonSegments& segments = store.segments;
-    const auto firstAffected = [&](std::uint32_t p) -> std::int32_t {
-        if (testBit(mReshooting, p)) return -1;
-        const PhotonPath& path = store.paths[p];
-        for (std::uint32_t k = 0; k < path.count; ++k) {
-            const std::size_t s = std::size_t(path.first) + k;
-            for (const MovedMobile& m : mMoved)
-                if (segments.hitEntity[s] == m.entity) return std::int32_t(k);
-            const glm::vec3& o = segments.origin[s];
-            const glm::vec3& d = segments.direction[s];
-            const float length = segments.length[s];
-            // World box, then the tight object-space box (an affine map keeps t), then the
-            // mobile's triangles.
-            for (const MovedMobile& m : mMoved)
-                if (segmentMeetsBox(o, d, length, m.newBox) &&
-                    segmentMeetsBox(glm::vec3(m.toObject * glm::vec4(o, 1.f)),
-                                    glm::mat3(m.toObject) * d, length, m.objectBox) &&
-                    scene.intersectMobile(m.entity, m.pose, Ray{o, 0.f, d, length}))
-                    return std::int32_t(k);
-        }
-        return -1;
-    };
+    // Paths being re-shot anyway are skipped (-1).
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
                       [&](const tbb::blocked_range<std::size_t>& range) {
                           for (std::size_t i = range.begin(); i < range.end(); ++i)
-                              mFirstAffected[i] = firstAffected(mCandidates[i]);
+                              mFirstAffected[i] = testBit(mReshooting, mCandidates[i])
+                                                      ? -1
+                                                      : nextAffected(scene, store, mCandidates[i], 0);
                       });
+    if (mSettings.reuseLandedPaths) skipLandedSegments(scene, store);
     for (const Job& job : mJobs)
         setBit(mReshooting, job.path, false);
     for (std::size_t i = 0; i < mCandidates.size(); ++i)
@@ -390,6 +410,94 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
             mJobs.push_back({mCandidates[i], std::uint32_t(mFirstAffected[i]), false});
     mStats.candidatePaths = mCandidates.size();
     mStats.retracedPaths = mJobs.size() - mStats.reshotPaths;
+}
+
+std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const PhotonStore& store,
+                                              std::uint32_t p, std::uint32_t from) const {
+    const PhotonSegments& segments = store.segments;
+    const PhotonPath& path = store.paths[p];
+    for (std::uint32_t k = from; k < path.count; ++k) {
+        const std::size_t s = std::size_t(path.first) + k;
+        for (const MovedMobile& m : mMoved)
+            if (segments.hitEntity[s] == m.entity) return std::int32_t(k);
+        const glm::vec3& o = segments.origin[s];
+        const glm::vec3& d = segments.direction[s];
+        const float length = segments.length[s];
+        // World box, then the tight object-space box (an affine map keeps t), then the
+        // mobile's triangles.
+        for (const MovedMobile& m : mMoved)
+            if (segmentMeetsBox(o, d, length, m.newBox) &&
+                segmentMeetsBox(glm::vec3(m.toObject * glm::vec4(o, 1.f)),
+                                glm::mat3(m.toObject) * d, length, m.objectBox) &&
+                scene.intersectMobile(m.entity, m.pose, Ray{o, 0.f, d, length}))
+                return std::int32_t(k);
+    }
+    return -1;
+}
+
+void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonStore& store) {
+    const PhotonSegments& segments = store.segments;
+    const float tolerance = kLandingTolerance * glm::length(mSceneBox.extent());
+    // The moved mobile a candidate's affected segment hit, when that mobile only translated.
+    const auto translatedMobileHit = [&](std::size_t i) -> const Mobile* {
+        if (mFirstAffected[i] < 0) return nullptr;
+        const Entity hit = segments.hitEntity[store.segmentIndex(mCandidates[i],
+                                                                 std::uint32_t(mFirstAffected[i]))];
+        for (const MovedMobile& m : mMoved)
+            if (hit == m.entity) return m.translatedOnly ? &mMobiles[mMobileIndex.at(hit)] : nullptr;
+        return nullptr;
+    };
+    mRecast.clear();
+    for (std::size_t i = 0; i < mCandidates.size(); ++i)
+        if (translatedMobileHit(i)) mRecast.push_back(std::uint32_t(i));
+    std::size_t kept = 0;
+    // Each round casts one segment per listed path; a path with several affected segments on
+    // translated mobiles takes a round for each that lands.
+    while (!mRecast.empty()) {
+        mStats.recastSegments += mRecast.size();
+        mRecastRays.resize(mRecast.size());
+        mRecastHits.resize(mRecast.size());
+        mRecastFix.resize(mRecast.size());
+        for (std::size_t j = 0; j < mRecast.size(); ++j) {
+            const std::size_t i = mRecast[j];
+            const std::size_t s =
+                store.segmentIndex(mCandidates[i], std::uint32_t(mFirstAffected[i]));
+            mRecastRays[j] = Ray{segments.origin[s], 0.f, segments.direction[s],
+                                 std::numeric_limits<float>::infinity()};
+        }
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, mRecast.size(), kTestGrain),
+            [&](const tbb::blocked_range<std::size_t>& range) {
+                scene.intersect(std::span(mRecastRays).subspan(range.begin(), range.size()),
+                                std::span(mRecastHits).subspan(range.begin(), range.size()));
+                for (std::size_t j = range.begin(); j < range.end(); ++j) {
+                    const std::size_t i = mRecast[j];
+                    const std::uint32_t k = std::uint32_t(mFirstAffected[i]);
+                    const std::size_t s = store.segmentIndex(mCandidates[i], k);
+                    const std::optional<Hit>& hit = mRecastHits[j];
+                    mRecastFix[j] = {s, segments.hitPrimitive[s]};
+                    if (!hit || hit->entity != segments.hitEntity[s] ||
+                        !(std::abs(hit->t - segments.length[s]) <= tolerance) ||
+                        !translatedMobileHit(i)->sameFacet(hit->primitive,
+                                                            segments.hitPrimitive[s])) {
+                        mRecast[j] = kSettled; // re-traced from segment k
+                        continue;
+                    }
+                    // Landed at the same point of the same plane, perhaps on a neighbouring
+                    // triangle of it: the record takes the triangle now there.
+                    mRecastFix[j].primitive = hit->primitive;
+                    mFirstAffected[i] = nextAffected(scene, store, mCandidates[i], k + 1);
+                }
+            });
+        for (std::size_t j = 0; j < mRecast.size(); ++j)
+            if (mRecast[j] != kSettled && mRecastFix[j].primitive != segments.hitPrimitive[mRecastFix[j].segment])
+                mRelabels.push_back(mRecastFix[j]);
+        for (const std::uint32_t i : mRecast)
+            kept += i != kSettled && mFirstAffected[i] < 0 ? 1 : 0;
+        std::erase_if(mRecast,
+                      [&](std::uint32_t i) { return i == kSettled || !translatedMobileHit(i); });
+    }
+    mStats.landedPaths = kept;
 }
 
 void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta) {

@@ -2,6 +2,8 @@
 
 #include "runtime/ecs/FrameContext.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/Hit.h"
+#include "runtime/raytrace/Ray.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonEmitter.h"
 #include "systems/photon_update/PhotonSettings.h"
@@ -10,6 +12,7 @@
 #include <glm/mat4x4.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <unordered_map>
 #include <vector>
 
@@ -56,10 +59,16 @@ public:
         std::size_t movedMobiles = 0;
         std::size_t candidatePaths = 0; ///< from the grid, before the exact test
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
+        std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
+        std::size_t recastSegments = 0; ///< segments cast again to see whether they landed
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
         bool compacted = false;
+        // Wall-clock milliseconds of the frame's stages (for the profile and benchmarks).
+        double findMs = 0;  ///< candidate paths from the grid, exact segment tests
+        double traceMs = 0; ///< re-tracing suffixes, writing the store and the delta
+        double gridMs = 0;  ///< marking changed paths, refreshing chunks, compaction
     };
 
     /// Throws qgi::Error on absurd settings (validatePhotonSettings).
@@ -77,6 +86,14 @@ private:
         Entity entity;
         Aabb objectBounds;
         glm::mat4 pose{1.f}; ///< the pose the stored paths were traced against
+        std::vector<glm::vec3> facetNormals; ///< unit, object space, per triangle (0: degenerate)
+        /// Triangles a and b lie in one plane facing the same way (a == b included).
+        bool sameFacet(std::uint32_t a, std::uint32_t b) const;
+    };
+    /// A landed segment's record moved to the neighbouring triangle it now lands on.
+    struct Relabel {
+        std::size_t segment = 0;
+        std::uint32_t primitive = 0;
     };
     struct MovedMobile {
         Entity entity;
@@ -84,6 +101,7 @@ private:
         glm::mat4 toObject{1.f}; ///< its inverse
         Aabb objectBox;          ///< object-space bounds, slightly widened
         Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
+        bool translatedOnly = false; ///< the linear part of the pose is unchanged
     };
     struct Sweep {
         std::uint32_t remaining = 0; ///< photons left to re-shoot since the light last changed
@@ -107,6 +125,14 @@ private:
     void scheduleReshoots();
     void findAffectedPaths(const RayScene& scene, const PhotonStore& store,
                            const PhotonPathGrid& grid);
+    /// The first segment k >= from of path p that hit a moved mobile at its old pose or
+    /// crosses one at its new pose; -1 when there is none.
+    std::int32_t nextAffected(const RayScene& scene, const PhotonStore& store, std::uint32_t p,
+                              std::uint32_t from) const;
+    /// reuseLandedPaths: casts again the affected segments that hit a mobile which only
+    /// translated; where one lands as recorded, moves on to the path's next affected segment
+    /// (-1 when none is left). Rounds until every entry of mFirstAffected is settled.
+    void skipLandedSegments(const RayScene& scene, const PhotonStore& store);
     void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
     void compact(PhotonStore& store);
     /// Store capacity for `live` segments.
@@ -131,6 +157,11 @@ private:
     std::vector<Aabb> mQueryBoxes;
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::int32_t> mFirstAffected;
+    std::vector<std::uint32_t> mRecast; ///< candidates whose affected segment is cast again
+    std::vector<Relabel> mRecastFix; ///< per recast segment: the triangle it lands on
+    std::vector<Relabel> mRelabels;
+    std::vector<Ray> mRecastRays;
+    std::vector<std::optional<Hit>> mRecastHits;
     std::vector<Job> mJobs;
     std::vector<std::uint32_t> mEnds;
     std::vector<std::uint64_t> mWrite;      ///< per job: where its path goes in the store

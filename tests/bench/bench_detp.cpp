@@ -220,7 +220,7 @@ void DiscIndexQuery(benchmark::State& state) {
     index.build(w.centers, w.normals, kRadius);
     std::vector<DiscCrossing> out;
     for (auto _ : state) {
-        index.collectCrossings(w.segments, w.indices, false, out);
+        index.collectCrossings(w.segments, w.indices, out);
         benchmark::DoNotOptimize(out.data());
     }
     state.counters["pairs"] = double(out.size());

@@ -4,9 +4,11 @@
 //    RawRandomRays/<scene> (bench_raytrace's incoherent-ray ceiling: random origins in the
 //    scene bounds, uniform directions, 8-wide batches) and RawPhotonRays/<scene> (the very
 //    segments the tracer traces, cast without any photon work). Same default thread count.
-//  - MobileUpdate/<scene>: one frame of the quasi-static update while the mobiles move 1 cm
-//    per frame (cornell: its block, 1M photons; atrium: all four mobiles, 4M photons),
-//    against FullReshoot/<scene>: the same frame with fullRecompute.
+//  - MobileUpdate/<scene>: one frame of the quasi-static update, photon update then DETP
+//    irradiance, while the mobiles move 1 cm per frame (cornell: its block, 1M photons, photon
+//    mode; atrium: all four mobiles, 4M photons, hybrid mode), against FullReshoot/<scene>:
+//    the same frame with fullRecompute (every photon re-shot, every vertex re-estimated).
+//    Counters split the frame into its stages (ms per frame).
 #include "components/Material.h"
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
@@ -15,6 +17,7 @@
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/BuiltinScenes.h"
 #include "runtime/scene/SceneInfo.h"
+#include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonTracer.h"
@@ -25,6 +28,7 @@
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
 
+#include <chrono>
 #include <limits>
 #include <map>
 #include <memory>
@@ -47,6 +51,7 @@ std::uint32_t photonsFor(const std::string& scene) {
 struct PhotonWorld {
     Registry registry;
     std::unique_ptr<PhotonUpdateSystem> system;
+    std::unique_ptr<DetpIrradianceSystem> irradiance;
     std::vector<Entity> mobiles;
     std::vector<glm::mat4> rest;
     std::uint64_t frame = 0;
@@ -64,6 +69,11 @@ struct PhotonWorld {
         settings.punctualLights = name != "cornell";
         system = std::make_unique<PhotonUpdateSystem>(settings);
         system->update(registry, FrameContext{});
+        DetpSettings detp;
+        detp.hybrid = settings.punctualLights;
+        irradiance = std::make_unique<DetpIrradianceSystem>(detp);
+        irradiance->build(registry);
+        irradiance->update(registry, FrameContext{});
         registry.clearChanges();
         mobiles = registry.view<const MobileMesh>().entities();
         for (const Entity e : mobiles)
@@ -83,7 +93,8 @@ struct PhotonWorld {
     const PhotonStore& store() const { return registry.ctx().get<PhotonStore>(); }
 
     /// Every mobile 1 cm further along x, turning back after 5 cm; then the frame's update.
-    void step() {
+    /// Returns the milliseconds DETP took.
+    double step() {
         ++frame;
         const int phase = int(frame % 10);
         const float offset = 0.01f * float(phase <= 5 ? phase : 10 - phase);
@@ -91,8 +102,15 @@ struct PhotonWorld {
             registry.patch<WorldTransform>(mobiles[i]).matrix =
                 glm::translate(rest[i], glm::vec3(offset, 0.f, 0.f));
         registry.ctx().get<RayScene>().syncMoved(registry);
-        system->update(registry, FrameContext{frame, 0.0, 0.f, 0});
+        const FrameContext context{frame, 0.0, 0.f, 0};
+        system->update(registry, context);
+        const auto start = std::chrono::steady_clock::now();
+        irradiance->update(registry, context);
+        const double detpMs =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count();
         registry.clearChanges();
+        return detpMs;
     }
 };
 
@@ -190,15 +208,30 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute);
-    double retraced = 0, candidates = 0, segments = 0;
+    double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
+           detp = 0, detpDelta = 0, detpMobile = 0;
     for (auto _ : state) {
-        w.step();
+        detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
         retraced += double(stats.retracedPaths);
+        landed += double(stats.landedPaths);
         candidates += double(stats.candidatePaths);
         segments += double(stats.tracedSegments);
+        find += stats.findMs;
+        trace += stats.traceMs;
+        grid += stats.gridMs;
+        detpDelta += w.irradiance->lastFrame().deltaMs;
+        detpMobile += w.irradiance->lastFrame().mobileMs;
     }
     reportFrames(state, w, retraced, candidates, segments);
+    const double frames = double(state.iterations());
+    state.counters["landed/frame"] = landed / frames;
+    state.counters["find ms"] = find / frames;
+    state.counters["trace ms"] = trace / frames;
+    state.counters["grid ms"] = grid / frames;
+    state.counters["detp ms"] = detp / frames;
+    state.counters["detp delta ms"] = detpDelta / frames;
+    state.counters["detp mobiles ms"] = detpMobile / frames;
 }
 
 } // namespace

@@ -12,10 +12,6 @@
 // bounds of 1.0 and 2.5 on the spread. A systematic error hides in per-vertex noise, so the
 // test also checks the mean of the signed z (standard error 1/sqrt(n)) and the summed
 // irradiance, each to 4 sigma: scaling the estimate by 0.95 fails both.
-#include "components/Mesh.h"
-#include "components/StaticMesh.h"
-#include "components/VertexIrradiance.h"
-#include "components/WorldTransform.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/BuiltinScenes.h"
 #include "systems/detp/DetpIrradianceSystem.h"
@@ -23,9 +19,9 @@
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "tests/reference/IrradianceReference.h"
+#include "tests/reference/VertexSamples.h"
 
 #include <glm/gtc/constants.hpp>
-#include <glm/mat3x3.hpp>
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>
 
@@ -36,32 +32,8 @@
 namespace qgi {
 namespace {
 
-struct Sample {
-    glm::vec3 position, normal;
-    glm::vec3 irradiance; ///< from the system, W/m^2
-};
-
-// A vertex whose disc neighbourhood is an open plane: no other surface within 2r along its
-// tangent plane or above it. Vertices in corners, under blocks or behind the luminaire see
-// geometry DETP's plain disc does not account for (the seed's "reachable area" problem).
-bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec3& n, float r) {
-    const glm::vec3 t = glm::normalize(std::abs(n.x) < 0.9f ? glm::cross(n, glm::vec3(1, 0, 0))
-                                                            : glm::cross(n, glm::vec3(0, 1, 0)));
-    const glm::vec3 b = glm::cross(n, t);
-    const glm::vec3 start = x + n * 1e-4f;
-    if (scene.occluded(Ray{start, 0.f, n, 2.f * r})) return false;
-    for (int k = 0; k < 8; ++k) {
-        const float a = glm::two_pi<float>() * float(k) / 8.f;
-        const glm::vec3 d = std::cos(a) * t + std::sin(a) * b;
-        if (scene.occluded(Ray{start, 0.f, d, 2.f * r})) return false;
-    }
-    return true;
-}
-
-double percentile(std::vector<double> v, double p) {
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, std::size_t(p * double(v.size())))];
-}
+using reference::percentile;
+using reference::VertexSample;
 
 TEST(DetpAccuracy, CornellPhotonModeAgreesWithMonteCarloReference) {
     Registry world;
@@ -80,20 +52,8 @@ TEST(DetpAccuracy, CornellPhotonModeAgreesWithMonteCarloReference) {
     const float r = detp.discRadius();
 
     // 240 static vertices with open neighbourhoods, spread evenly over the list.
-    std::vector<Sample> all;
-    world.view<const StaticMesh, const Mesh, const WorldTransform, const VertexIrradiance>().each(
-        [&](const StaticMesh&, const Mesh& mesh, const WorldTransform& world_,
-            const VertexIrradiance& e) {
-            const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world_.matrix)));
-            for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
-                const glm::vec3 x = glm::vec3(world_.matrix * glm::vec4(mesh.positions[v], 1.f));
-                const glm::vec3 n = glm::normalize(normalMatrix * mesh.normals[v]);
-                if (openNeighbourhood(scene, x, n, r)) all.push_back({x, n, e.irradiance[v]});
-            }
-        });
-    ASSERT_GE(all.size(), 240u);
-    std::vector<Sample> samples;
-    for (std::size_t i = 0; i < 240; ++i) samples.push_back(all[i * all.size() / 240]);
+    const std::vector<VertexSample> samples = reference::openStaticVertices(world, scene, r, 240);
+    ASSERT_EQ(samples.size(), 240u);
 
     // DETP's own statistics from the stored segments, by brute force (which also checks the
     // system's disc index on a real scene).
@@ -118,7 +78,7 @@ TEST(DetpAccuracy, CornellPhotonModeAgreesWithMonteCarloReference) {
     referenceSettings.samplesPerPoint = 16384;
     referenceSettings.includeEnvironment = false; // photons are not emitted by the sky
     std::vector<glm::vec3> xs, ns;
-    for (const Sample& sample : samples) {
+    for (const VertexSample& sample : samples) {
         xs.push_back(sample.position);
         ns.push_back(sample.normal);
     }

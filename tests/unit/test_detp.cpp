@@ -84,8 +84,9 @@ void push(PhotonSegments& s, const Segment& seg) {
     s.bounce.push_back(seg.bounce);
 }
 
-void appendPath(PhotonStore& store, std::span<const Segment> path) {
-    store.paths.push_back({std::uint32_t(store.segments.size()), std::uint16_t(path.size()), 0});
+void appendPath(PhotonStore& store, std::span<const Segment> path, std::uint16_t light = 0) {
+    store.paths.push_back(
+        {std::uint32_t(store.segments.size()), std::uint16_t(path.size()), light});
     for (const Segment& seg : path)
         push(store.segments, seg);
 }
@@ -254,17 +255,21 @@ TEST(Detp, SegmentsFromBehindDoNotCount) {
     EXPECT_FLOAT_EQ(irradiance(registry, floor).irradiance[4].x, float(3.0 / (kPi * 0.01)));
 }
 
-TEST(Detp, HybridModeSkipsSegmentsThatLeaveALight) {
+TEST(Detp, HybridModeSkipsOnlyTheSegmentsThatLeaveAPunctualLight) {
     Registry registry;
     addResources(registry);
     const Entity floor =
         addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
                 kIdentity, false, "floor");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
+    store.lights = {PhotonLight{{}, glm::vec3(2.f), 2, true},    // a point light
+                    PhotonLight{{}, glm::vec3(7.f), 1, false}};  // an emissive surface
     const Segment direct{{0.f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, {2.f, 0.f, 0.f}, floor, 0, 0};
     const Segment bounced{{0.05f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, {0.f, 5.f, 0.f}, floor, 0, 1};
-    appendPath(store, std::span(&direct, 1));
-    appendPath(store, std::span(&bounced, 1));
+    const Segment fromPanel{{-0.05f, 1.f, 0.f}, {0.f, -1.f, 0.f}, 1.f, {0.f, 0.f, 7.f}, floor, 1, 0};
+    appendPath(store, std::span(&direct, 1), 0);
+    appendPath(store, std::span(&bounced, 1), 0);
+    appendPath(store, std::span(&fromPanel, 1), 1);
     const float area = float(kPi * 0.01);
     for (const bool hybrid : {false, true}) {
         DetpSettings settings;
@@ -274,8 +279,38 @@ TEST(Detp, HybridModeSkipsSegmentsThatLeaveALight) {
         system.build(registry);
         system.update(registry, {});
         const glm::vec3 e = irradiance(registry, floor).irradiance[4];
-        EXPECT_FLOAT_EQ(e.x, hybrid ? 0.f : 2.f / area);
-        EXPECT_FLOAT_EQ(e.y, 5.f / area);
+        EXPECT_FLOAT_EQ(e.x, hybrid ? 0.f : 2.f / area); // the renderer draws the point light
+        EXPECT_FLOAT_EQ(e.y, 5.f / area);                // its indirect light always counts
+        EXPECT_FLOAT_EQ(e.z, 7.f / area);                // and so does the area light
+    }
+
+    // The comparison estimators follow the same rule: in hybrid mode each gives what photon mode
+    // gives on the store without the point light's direct segment.
+    PhotonStore withoutDirect = store;
+    withoutDirect.paths.erase(withoutDirect.paths.begin());
+    for (const IrradianceEstimator estimator :
+         {IrradianceEstimator::ImpactCount, IrradianceEstimator::PhotonMap}) {
+        std::vector<glm::vec3> expected;
+        for (const bool hybrid : {false, true}) {
+            PhotonStore& current = registry.ctx().get<PhotonStore>();
+            const PhotonStore full = current;
+            if (!hybrid) current = withoutDirect;
+            DetpSettings settings;
+            settings.discRadius = 0.1f;
+            settings.photonMapNeighbours = 2;
+            settings.estimator = estimator;
+            settings.hybrid = hybrid;
+            DetpIrradianceSystem system(settings);
+            system.build(registry);
+            registry.ctx().get<PhotonDelta>().full = true;
+            system.update(registry, {});
+            const auto& e = irradiance(registry, floor).irradiance;
+            if (!hybrid) expected.assign(e.begin(), e.end());
+            else EXPECT_EQ(std::vector<glm::vec3>(e.begin(), e.end()), expected)
+                << irradianceEstimatorName(estimator);
+            current = full;
+        }
+        EXPECT_GT(expected[4].z, 0.f) << irradianceEstimatorName(estimator);
     }
 }
 
@@ -664,6 +699,13 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     info.bounds.extend(glm::vec3(3.f, 4.f, 0.f));
     EXPECT_FLOAT_EQ(defaultDiscRadius(info), 0.05f);
     EXPECT_THROW(defaultDiscRadius(SceneInfo{}), Error);
+    // Scarce photons widen the disc to about 64 landings of evenly spread photons:
+    // 100 m^2 and 10k photons give sqrt(6400 / (pi 10^4)) = 0.451 m.
+    EXPECT_NEAR(defaultDiscRadius(info, 100.0, 10'000), std::sqrt(0.64 / kPi), 1e-6);
+    // Plenty keep the mesh rule; no area or no photons leave it alone.
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 100.0, 100'000'000), 0.05f);
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 0.0, 10'000), 0.05f);
+    EXPECT_FLOAT_EQ(defaultDiscRadius(info, 100.0, 0), 0.05f);
 
     Registry registry;
     addResources(registry);

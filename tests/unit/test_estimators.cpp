@@ -324,7 +324,7 @@ TEST(ImpactCount, EnergyBookkeepingThroughAddAndSubtract) {
     ImpactWorld world;
     std::mt19937 rng(8);
     ImpactCounter counter;
-    counter.reset(world.receivers, false);
+    counter.reset(world.receivers);
 
     // The current set, as (segment set, index) pairs, and the bookkeeping reference.
     std::vector<PhotonSegments> sets;
@@ -374,13 +374,11 @@ TEST(ImpactCount, EnergyBookkeepingThroughAddAndSubtract) {
 TEST(ImpactCount, VertexIsTheAreaWeightedMeanOfItsTriangles) {
     ImpactWorld world;
     ImpactCounter counter;
-    counter.reset(world.receivers, true);
+    counter.reset(world.receivers);
     PhotonSegments s;
     // Floor triangles 0 and 1 share floor vertex 0's corner cell; each has area 0.005 m^2.
     pushSegment(s, {}, {0.f, -1.f, 0.f}, 1.f, {2.f, 0.f, 0.f}, world.floor, 0, 1);
     pushSegment(s, {}, {0.f, -1.f, 0.f}, 1.f, {0.f, 3.f, 0.f}, world.floor, 1, 2);
-    // Hybrid mode: a segment that leaves a light is not counted.
-    pushSegment(s, {}, {0.f, -1.f, 0.f}, 1.f, {7.f, 7.f, 7.f}, world.floor, 1, 0);
     counter.accumulate(world.receivers, s, allIndices(s), 1.0);
     std::vector<std::uint32_t> touched;
     counter.takeTouchedVertices(touched);

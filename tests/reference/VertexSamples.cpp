@@ -1,0 +1,62 @@
+#include "tests/reference/VertexSamples.h"
+
+#include "components/Mesh.h"
+#include "components/StaticMesh.h"
+#include "components/VertexIrradiance.h"
+#include "components/WorldTransform.h"
+#include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace qgi::reference {
+
+bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec3& n, float r) {
+    const glm::vec3 t = glm::normalize(std::abs(n.x) < 0.9f ? glm::cross(n, glm::vec3(1, 0, 0))
+                                                            : glm::cross(n, glm::vec3(0, 1, 0)));
+    const glm::vec3 b = glm::cross(n, t);
+    const glm::vec3 start = x + n * 1e-4f;
+    if (scene.occluded(Ray{start, 0.f, n, 2.f * r})) return false;
+    for (int k = 0; k < 8; ++k) {
+        const float a = glm::two_pi<float>() * float(k) / 8.f;
+        const glm::vec3 d = std::cos(a) * t + std::sin(a) * b;
+        if (scene.occluded(Ray{start, 0.f, d, 2.f * r})) return false;
+    }
+    return true;
+}
+
+std::vector<VertexSample> openStaticVertices(const Registry& registry, const RayScene& scene,
+                                             float r, std::size_t count) {
+    std::vector<VertexSample> all;
+    registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
+        [&](Entity e, const StaticMesh&, const Mesh& mesh, const WorldTransform& world) {
+            const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world.matrix)));
+            const VertexIrradiance* irradiance = registry.tryGet<VertexIrradiance>(e);
+            for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
+                const glm::vec3 x = glm::vec3(world.matrix * glm::vec4(mesh.positions[v], 1.f));
+                const glm::vec3 n = glm::normalize(normalMatrix * mesh.normals[v]);
+                if (!openNeighbourhood(scene, x, n, r)) continue;
+                const bool lit = irradiance && v < irradiance->irradiance.size();
+                all.push_back({x, n, lit ? irradiance->irradiance[v] : glm::vec3(0.f)});
+            }
+        });
+    if (all.size() <= count) return all;
+    std::vector<VertexSample> picked;
+    for (std::size_t i = 0; i < count; ++i)
+        picked.push_back(all[i * all.size() / count]);
+    return picked;
+}
+
+double percentile(std::vector<double> values, double p) {
+    if (values.empty()) return 0.0;
+    std::sort(values.begin(), values.end());
+    return values[std::min(values.size() - 1, std::size_t(p * double(values.size())))];
+}
+
+} // namespace qgi::reference

@@ -1,0 +1,35 @@
+#pragma once
+
+#include <glm/vec3.hpp>
+
+#include <cstddef>
+#include <vector>
+
+namespace qgi {
+class Registry;
+class RayScene;
+} // namespace qgi
+
+namespace qgi::reference {
+
+/// A static mesh vertex in world space, with the irradiance the system under test gave it.
+struct VertexSample {
+    glm::vec3 position{0.f}, normal{0.f};
+    glm::vec3 irradiance{0.f}; ///< VertexIrradiance, W/m^2 (zero when the entity has none)
+};
+
+/// Whether a vertex's disc neighbourhood is an open plane: no surface within 2r along its
+/// tangent plane (8 directions) or above it. Vertices in corners, under blocks or behind the
+/// luminaire see geometry a plain tangent disc does not account for (seed 000's "reachable
+/// area" problem), so accuracy checks leave them out.
+bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec3& n, float r);
+
+/// `count` static vertices with open neighbourhoods at radius r, spread evenly over the list of
+/// all such vertices in entity order (fewer when the scene has fewer).
+std::vector<VertexSample> openStaticVertices(const Registry& registry, const RayScene& scene,
+                                             float r, std::size_t count);
+
+/// The p-quantile (0..1) of `values` by the nearest-rank rule; 0 for an empty list.
+double percentile(std::vector<double> values, double p);
+
+} // namespace qgi::reference
