@@ -84,7 +84,8 @@ inline void addSample(ShRgb& coefficients, const glm::vec3& d, const glm::vec3& 
                       float weight) {
     const auto y = basis(d);
     const glm::vec3 r = radiance * weight;
-    for (int i = 0; i < kCoefficientCount; ++i) coefficients[i] += r * y[i];
+    for (int i = 0; i < kCoefficientCount; ++i)
+        coefficients[i] += r * y[i];
 }
 
 /// Coefficients of a directional source (a delta in direction `towardSource`, unit) that
@@ -99,7 +100,8 @@ inline ShRgb directional(const glm::vec3& towardSource, const glm::vec3& irradia
 inline glm::vec3 radiance(const ShRgb& L, const glm::vec3& d) {
     const auto y = basis(d);
     glm::vec3 sum(0.f);
-    for (int i = 0; i < kCoefficientCount; ++i) sum += L[i] * y[i];
+    for (int i = 0; i < kCoefficientCount; ++i)
+        sum += L[i] * y[i];
     return sum;
 }
 

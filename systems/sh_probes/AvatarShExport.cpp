@@ -36,7 +36,8 @@ std::string avatarShCsvHeader() {
                                               "L2m1", "L20",  "L21", "L22"};
     std::string header = "avatar,x,y,z";
     for (const char* name : kNames)
-        for (const char* channel : {"_r", "_g", "_b"}) header += std::string(",") + name + channel;
+        for (const char* channel : {"_r", "_g", "_b"})
+            header += std::string(",") + name + channel;
     return header;
 }
 
@@ -48,7 +49,8 @@ void exportAvatarSh(const Registry& registry, const std::filesystem::path& path)
         [&](Entity e, const Avatar&, const WorldTransform& world, const ShLighting& lighting) {
             const Name* name = registry.tryGet<Name>(e);
             out << csvField(name ? name->value : "entity" + std::to_string(e.index));
-            for (int k = 0; k < 3; ++k) out << ',' << number(world.matrix[3][k]);
+            for (int k = 0; k < 3; ++k)
+                out << ',' << number(world.matrix[3][k]);
             for (const auto& c : lighting.coefficients)
                 out << ',' << number(c.r) << ',' << number(c.g) << ',' << number(c.b);
             out << '\n';

@@ -70,15 +70,17 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
         }
         const std::uint8_t* masks = &mVisibility[std::size_t(cell) * mPointsPerCell];
         std::fill(visibility, visibility + 8, 0.f);
-        const std::uint32_t base = std::uint32_t(j.x) + side * (std::uint32_t(j.y) + side * std::uint32_t(j.z));
+        const std::uint32_t base =
+            std::uint32_t(j.x) + side * (std::uint32_t(j.y) + side * std::uint32_t(j.z));
         const std::uint32_t step[2] = {0, 1};
         for (int k = 0; k < 8; ++k) {
             const int dx = k & 1, dy = (k >> 1) & 1, dz = (k >> 2) & 1;
-            const float w = (dx ? u.x : 1.f - u.x) * (dy ? u.y : 1.f - u.y) * (dz ? u.z : 1.f - u.z);
-            const std::uint32_t mask =
-                masks[base + step[dx] + side * (step[dy] + side * step[dz])];
+            const float w =
+                (dx ? u.x : 1.f - u.x) * (dy ? u.y : 1.f - u.y) * (dz ? u.z : 1.f - u.z);
+            const std::uint32_t mask = masks[base + step[dx] + side * (step[dy] + side * step[dz])];
             // Branch-free: the eight corners' bits scaled by w (vectorises to one AVX lane each).
-            for (int c = 0; c < 8; ++c) visibility[c] += w * float((mask >> c) & 1u);
+            for (int c = 0; c < 8; ++c)
+                visibility[c] += w * float((mask >> c) & 1u);
         }
     }
 
@@ -99,9 +101,11 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
         if (!(sumEnabled > 0.f)) {
             // All corners disabled, or p sits exactly on the far face of disabled corners:
             // try the enabled corners with equal weight before giving up.
-            for (int c = 0; c < 8; ++c) trilinear[c] = mEnabled[probes[c]] ? 1.f : 0.f;
+            for (int c = 0; c < 8; ++c)
+                trilinear[c] = mEnabled[probes[c]] ? 1.f : 0.f;
             sumEnabled = 0.f;
-            for (int c = 0; c < 8; ++c) sumEnabled += trilinear[c];
+            for (int c = 0; c < 8; ++c)
+                sumEnabled += trilinear[c];
             if (!(sumEnabled > 0.f)) return false;
         }
         fallback = true;
@@ -115,7 +119,8 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
         if (weights[c] == 0.f) continue;
         const float w = weights[c] * inverse;
         const float* probe = &mCoefficients[probes[c]][0].x;
-        for (int i = 0; i < 27; ++i) result[i] += w * probe[i];
+        for (int i = 0; i < 27; ++i)
+            result[i] += w * probe[i];
     }
     std::memcpy(&out[0].x, result, sizeof result);
     if (blend) {

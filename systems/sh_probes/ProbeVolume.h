@@ -48,7 +48,8 @@ struct ProbeGrid {
     }
     glm::ivec3 cellCoords(std::uint32_t index) const {
         const glm::ivec3 n = cellCounts();
-        return {int(index % std::uint32_t(n.x)), int(index / std::uint32_t(n.x) % std::uint32_t(n.y)),
+        return {int(index % std::uint32_t(n.x)),
+                int(index / std::uint32_t(n.x) % std::uint32_t(n.y)),
                 int(index / (std::uint32_t(n.x) * std::uint32_t(n.y)))};
     }
     /// The cell holding `p` (clamped into the lattice) and p's position in it, each in [0, 1].
@@ -59,7 +60,7 @@ struct ProbeGrid {
 struct ProbeBlend {
     std::uint32_t probes[8] = {}; ///< the cell's corner probes, corner c = bits (x, y, z) of c
     float weights[8] = {};        ///< normalised weights used; 0 for suppressed corners
-    bool fallback = false; ///< every enabled corner was hidden: blended ignoring visibility
+    bool fallback = false;        ///< every enabled corner was hidden: blended ignoring visibility
 };
 
 /** World resource: the SH irradiance volume (seed 002 section 3.4). Each probe holds order-2
@@ -88,6 +89,8 @@ public:
     /// lattice coordinates, so points shared by neighbouring cells are bit-identical.
     glm::vec3 latticePoint(std::uint32_t cell, const glm::ivec3& abc) const;
     bool visibilityReady(std::uint32_t cell) const { return mVisibilityReady[cell] != 0; }
+    /// Computed, and every lattice point of the cell sees all 8 corners.
+    bool visibilityOpen(std::uint32_t cell) const { return mVisibilityReady[cell] == 2; }
     /// Bit c of mask[point] set: corner probe c is visible from that lattice point.
     std::uint8_t* visibilityMasks(std::uint32_t cell) {
         return &mVisibility[std::size_t(cell) * mPointsPerCell];
@@ -100,7 +103,8 @@ public:
             return;
         }
         const std::uint8_t* m = &mVisibility[std::size_t(cell) * mPointsPerCell];
-        mVisibilityReady[cell] = std::all_of(m, m + mPointsPerCell, [](std::uint8_t b) { return b == 0xff; }) ? 2 : 1;
+        mVisibilityReady[cell] =
+            std::all_of(m, m + mPointsPerCell, [](std::uint8_t b) { return b == 0xff; }) ? 2 : 1;
     }
     void invalidateVisibility() { std::fill(mVisibilityReady.begin(), mVisibilityReady.end(), 0); }
 

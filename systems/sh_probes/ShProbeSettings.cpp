@@ -30,6 +30,9 @@ void validate(const ShProbeSettings& s) {
     if (!(s.mobileSolidAngleShare > 0.f && s.mobileSolidAngleShare <= 1.f))
         fail("ShProbeSettings.mobileSolidAngleShare = ", s.mobileSolidAngleShare,
              ": must be in (0, 1]");
+    if (s.minDeltaEndPoints < 1 || s.minDeltaEndPoints > 65535)
+        fail("ShProbeSettings.minDeltaEndPoints = ", s.minDeltaEndPoints,
+             ": must be in [1, 65535]");
     if (s.visibilitySubdivisions < 1 || s.visibilitySubdivisions > 16)
         fail("ShProbeSettings.visibilitySubdivisions = ", s.visibilitySubdivisions,
              ": must be in [1, 16]");

@@ -95,7 +95,8 @@ void ShProbeSystem::build(Registry& registry) {
         fail("SH probes: the scene bounds are not finite");
     const float spacing = resolveProbeSpacing(mSettings, bounds);
     if (bounds.empty()) bounds.extend(glm::vec3(0.f)); // a spacing was given: a minimal lattice
-    const glm::dvec3 counts = glm::max(glm::dvec3(2.0), glm::ceil(glm::dvec3(bounds.extent()) / double(spacing)));
+    const glm::dvec3 counts =
+        glm::max(glm::dvec3(2.0), glm::ceil(glm::dvec3(bounds.extent()) / double(spacing)));
     const double probes = counts.x * counts.y * counts.z;
     if (probes > double(mSettings.maxProbes))
         fail("SH probes: spacing ", spacing, " m over bounds of ", bounds.extent().x, " x ",
@@ -105,7 +106,7 @@ void ShProbeSystem::build(Registry& registry) {
     mSpacing = spacing;
     mInfluence = mSettings.influenceDistance > 0.f ? mSettings.influenceDistance : 2.f * spacing;
     mVolume = &registry.ctx().emplaceOrReplace<ProbeVolume>(ProbeGrid::over(bounds, spacing),
-                                                   mSettings.visibilitySubdivisions);
+                                                            mSettings.visibilitySubdivisions);
     mRays = &registry.ctx().get<RayScene>();
     mEnvironment = isFinite(info->environment) ? info->environment : glm::vec3(0.f);
     mStale.assign(mVolume->probeCount(), 0);
@@ -115,7 +116,8 @@ void ShProbeSystem::build(Registry& registry) {
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const MobileMesh&, const Mesh& mesh, const WorldTransform& world) {
             Mobile m;
-            for (const glm::vec3& p : mesh.positions) m.objectBounds.extend(p);
+            for (const glm::vec3& p : mesh.positions)
+                m.objectBounds.extend(p);
             m.worldBounds = transformBox(m.objectBounds, world.matrix);
             mMobiles.emplace(e, m);
         });
@@ -220,7 +222,8 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
 
     std::vector<Ray> rays(n);
     std::vector<std::optional<Hit>> hits(n);
-    for (std::uint32_t k = 0; k < n; ++k) rays[k] = Ray{x, 0.f, rotation * sh::fibonacciDirection(k, n)};
+    for (std::uint32_t k = 0; k < n; ++k)
+        rays[k] = Ray{x, 0.f, rotation * sh::fibonacciDirection(k, n)};
     mRays->intersect(rays, hits);
 
     std::vector<glm::vec3> radiance(n, glm::vec3(0.f));
@@ -260,8 +263,8 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
         std::vector<glm::vec3> contribution;
         std::vector<glm::vec3> candidate(mLights.size());
         std::vector<Ray> candidateRay(mLights.size());
-        const std::uint64_t key = mix64(mSettings.seed ^ 0x4c69'6768'7450'6963ull) ^
-                                  (std::uint64_t(probe) << 32);
+        const std::uint64_t key =
+            mix64(mSettings.seed ^ 0x4c69'6768'7450'6963ull) ^ (std::uint64_t(probe) << 32);
         for (std::uint32_t k = 0; k < n; ++k) {
             if (!hits[k] || diffuse[k] == glm::vec3(0.f)) continue;
             const Hit& hit = *hits[k];
@@ -315,10 +318,12 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
             glm::vec3 toward, e0;
             float distance = 0.f;
             if (!lightAt(light, x, toward, distance, e0) || e0 == glm::vec3(0.f)) continue;
-            const Ray ray{x, 0.f, toward, std::isinf(distance) ? distance : distance * (1.f - 1e-5f)};
+            const Ray ray{x, 0.f, toward,
+                          std::isinf(distance) ? distance : distance * (1.f - 1e-5f)};
             if (mRays->occluded(ray)) continue;
             const sh::ShRgb direct = sh::directional(toward, e0);
-            for (int i = 0; i < sh::kCoefficientCount; ++i) coefficients[i] += direct[i];
+            for (int i = 0; i < sh::kCoefficientCount; ++i)
+                coefficients[i] += direct[i];
         }
 
     volume.coefficients(probe) = coefficients;
@@ -341,7 +346,8 @@ void ShProbeSystem::projectProbes(const Registry& registry, std::span<const std:
 void ShProbeSystem::projectAll(const Registry& registry) {
     if (!mBuilt) return;
     mRefresh.resize(mVolume->probeCount());
-    for (std::uint32_t p = 0; p < mRefresh.size(); ++p) mRefresh[p] = p;
+    for (std::uint32_t p = 0; p < mRefresh.size(); ++p)
+        mRefresh[p] = p;
     projectProbes(registry, mRefresh);
     mProjected = true;
 }
@@ -472,6 +478,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);
         if (!world || !isFinite(world->matrix)) continue;
         Mobile& mobile = it->second;
+        if (mobile.objectBounds.empty()) continue; // no vertices: nothing to see or hide
         const Aabb now = transformBox(mobile.objectBounds, world->matrix);
         // Reach: the influence distance, or as far as the mobile still covers the given
         // share of a probe's sphere of directions.
@@ -495,11 +502,11 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         mobile.worldBounds = now;
     }
 
-    // The delta's end points: where per-vertex irradiance can have changed. They are
-    // de-duplicated on a lattice of half the probe spacing first (a moving mobile re-traces
-    // thousands of paths whose ends crowd into a few places), then each touched half-cell
-    // marks the probes within the influence distance of its centre, widened by its half
-    // diagonal so no end point's neighbourhood is missed.
+    // The delta's end points: where per-vertex irradiance can have changed. They are counted
+    // on a lattice of half the probe spacing first (a moving mobile re-traces thousands of
+    // paths whose ends crowd into a few places); each half-cell with at least
+    // minDeltaEndPoints of them marks the probes within the influence distance of its
+    // centre, widened by its half diagonal so no end point's neighbourhood is missed.
     if (delta && !delta->paths.empty()) {
         const float fine = 0.5f * grid.spacing;
         const glm::ivec3 fineCounts = 2 * grid.counts + 1;
@@ -511,8 +518,13 @@ void ShProbeSystem::markChanges(const Registry& registry) {
                 if (!std::isfinite(s.length[i])) continue;
                 const glm::vec3 end = s.origin[i] + s.length[i] * s.direction[i];
                 if (!isFinite(end)) continue;
-                const glm::vec3 f = glm::clamp(glm::floor((end - fineOrigin) / fine), glm::vec3(0.f), hiBound);
-                mFineTouched[std::size_t(f.x) + fineCounts.x * (std::size_t(f.y) + fineCounts.y * std::size_t(f.z))] = 1;
+                const glm::vec3 f =
+                    glm::clamp(glm::floor((end - fineOrigin) / fine), glm::vec3(0.f), hiBound);
+                std::uint16_t& count =
+                    mFineTouched[std::size_t(f.x) +
+                                 fineCounts.x *
+                                     (std::size_t(f.y) + fineCounts.y * std::size_t(f.z))];
+                if (count < 65535) ++count;
             }
         };
         touch(delta->oldSegments);
@@ -521,7 +533,10 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         for (int z = 0; z < fineCounts.z; ++z)
             for (int y = 0; y < fineCounts.y; ++y)
                 for (int x = 0; x < fineCounts.x; ++x)
-                    if (mFineTouched[std::size_t(x) + fineCounts.x * (std::size_t(y) + fineCounts.y * std::size_t(z))])
+                    if (mFineTouched[std::size_t(x) +
+                                     fineCounts.x *
+                                         (std::size_t(y) + fineCounts.y * std::size_t(z))] >=
+                        mSettings.minDeltaEndPoints)
                         markNear(fineOrigin + fine * (glm::vec3(x, y, z) + 0.5f), radius);
     }
 }
@@ -590,7 +605,8 @@ void ShProbeSystem::computeVisibility(std::uint32_t cell, ProbeVolume& volume) c
     const glm::ivec3 base = grid.cellCoords(cell);
     glm::vec3 corners[8];
     for (int c = 0; c < 8; ++c)
-        corners[c] = grid.position(grid.probeIndex(base + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1)));
+        corners[c] =
+            grid.position(grid.probeIndex(base + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1)));
     const int side = int(volume.visibilitySubdivisions()) + 1;
     std::vector<Ray> rays;
     std::vector<std::uint32_t> slot; // point * 8 + corner
@@ -620,53 +636,45 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
     if (!mBuilt) return;
     ProbeVolume& volume = *mVolume;
     const ProbeGrid& grid = volume.grid();
+
+    // New avatars get their ShLighting first, so the lookup loop changes no pool; and the
+    // cells visited for the first time (or since a mobile moved through them) are collected.
     mAvatarEntities.clear();
-    mAvatarPositions.clear();
+    mPendingCells.clear();
     registry.view<const Avatar, const WorldTransform>().each(
         [&](Entity e, const Avatar&, const WorldTransform& world) {
-            mAvatarEntities.push_back(e);
-            mAvatarPositions.push_back(glm::vec3(world.matrix[3]));
+            if (!registry.has<ShLighting>(e)) mAvatarEntities.push_back(e);
+            const glm::vec3 p(world.matrix[3]);
+            if (!isFinite(p)) return;
+            glm::ivec3 cell;
+            glm::vec3 t;
+            grid.locate(p, cell, t);
+            const std::uint32_t index = grid.cellIndex(cell);
+            if (volume.visibilityReady(index) || mCellQueued[index]) return;
+            mCellQueued[index] = 1;
+            mPendingCells.push_back(index);
         });
-
-    // Cells visited for the first time (or since a mobile moved through them).
-    mPendingCells.clear();
-    for (const glm::vec3& p : mAvatarPositions) {
-        if (!isFinite(p)) continue;
-        glm::ivec3 cell;
-        glm::vec3 t;
-        grid.locate(p, cell, t);
-        const std::uint32_t index = grid.cellIndex(cell);
-        if (volume.visibilityReady(index) || mCellQueued[index]) continue;
-        mCellQueued[index] = 1;
-        mPendingCells.push_back(index);
-    }
+    for (const Entity e : mAvatarEntities)
+        registry.emplace<ShLighting>(e);
     if (!mPendingCells.empty()) {
         tbb::parallel_for(std::size_t(0), mPendingCells.size(),
                           [&](std::size_t i) { computeVisibility(mPendingCells[i], volume); });
-        for (const std::uint32_t c : mPendingCells) mCellQueued[c] = 0;
+        for (const std::uint32_t c : mPendingCells)
+            mCellQueued[c] = 0;
     }
     mStats.visibilityCells += mPendingCells.size();
 
-    for (std::size_t i = 0; i < mAvatarEntities.size(); ++i) {
-        const glm::vec3& p = mAvatarPositions[i];
-        if (!isFinite(p)) {
-            ++mStats.unlit;
-            continue;
-        }
-        ProbeBlend blend;
-        sh::ShRgb coefficients;
-        if (!volume.interpolate(p, coefficients, &blend)) {
-            ++mStats.unlit;
-            continue;
-        }
-        mStats.fallbacks += blend.fallback;
-        const Entity e = mAvatarEntities[i];
-        if (ShLighting* lighting = registry.tryGet<ShLighting>(e))
-            lighting->coefficients = coefficients;
-        else
-            registry.emplace<ShLighting>(e, ShLighting{coefficients});
-        ++mStats.avatars;
-    }
+    registry.view<const Avatar, const WorldTransform, ShLighting>().each(
+        [&](const Avatar&, const WorldTransform& world, ShLighting& lighting) {
+            const glm::vec3 p(world.matrix[3]);
+            ProbeBlend blend;
+            if (!isFinite(p) || !volume.interpolate(p, lighting.coefficients, &blend)) {
+                ++mStats.unlit; // left as it was
+                return;
+            }
+            mStats.fallbacks += blend.fallback;
+            ++mStats.avatars;
+        });
 }
 
 void ShProbeSystem::update(Registry& registry, const FrameContext&) {

@@ -45,7 +45,8 @@ class RayScene;
  *  Following the scene (update()): the first update projects every probe. Later frames mark
  *  probes stale
  *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments,
- *     old and new: the only places where per-vertex irradiance can have changed;
+ *     old and new, the only places where per-vertex irradiance can have changed, wherever at
+ *     least minDeltaEndPoints of them fall in one half-spacing cell;
  *   - near a moved mobile's old or new world bounds: within influenceDistance, or as far as
  *     its bounding sphere covers mobileSolidAngleShare of a probe's sphere of directions
  *     (what it hides, shows or bleeds onto changed; the visibility masks of cells it
@@ -71,15 +72,15 @@ class ShProbeSystem {
 public:
     /// What the last update() did, for profiling and tests.
     struct FrameStats {
-        bool full = false;                 ///< every probe was projected (first update)
-        std::size_t markedStale = 0;       ///< probes newly marked stale this frame
-        std::size_t staleBefore = 0;       ///< stale probes before this frame's refresh
-        std::size_t refreshed = 0;         ///< probes re-projected this frame
-        std::size_t staleAfter = 0;        ///< stale probes left for later frames
-        std::size_t visibilityCells = 0;   ///< cell visibility masks computed this frame
-        std::size_t avatars = 0;           ///< avatars written
-        std::size_t fallbacks = 0;         ///< avatars whose visible corners were all hidden
-        std::size_t unlit = 0;             ///< avatars among 8 disabled probes (left as they were)
+        bool full = false;               ///< every probe was projected (first update)
+        std::size_t markedStale = 0;     ///< probes newly marked stale this frame
+        std::size_t staleBefore = 0;     ///< stale probes before this frame's refresh
+        std::size_t refreshed = 0;       ///< probes re-projected this frame
+        std::size_t staleAfter = 0;      ///< stale probes left for later frames
+        std::size_t visibilityCells = 0; ///< cell visibility masks computed this frame
+        std::size_t avatars = 0;         ///< avatars written
+        std::size_t fallbacks = 0;       ///< avatars whose visible corners were all hidden
+        std::size_t unlit = 0;           ///< avatars among 8 disabled probes (left as they were)
     };
 
     /// Throws qgi::Error for settings out of range (see validate()).
@@ -140,8 +141,8 @@ private:
     void markShadowed(const Aabb& box);
     /// Irradiance at normal incidence from `light` at x, W/m^2, and the unit direction toward
     /// it; false when it sends nothing to x.
-    static bool lightAt(const Light& light, const glm::vec3& x, glm::vec3& toward,
-                        float& distance, glm::vec3& irradiance);
+    static bool lightAt(const Light& light, const glm::vec3& x, glm::vec3& toward, float& distance,
+                        glm::vec3& irradiance);
     void projectProbe(std::uint32_t probe, ProbeVolume& volume) const;
     void computeVisibility(std::uint32_t cell, ProbeVolume& volume) const;
     void markNear(const glm::vec3& point, float radius);
@@ -171,11 +172,10 @@ private:
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::uint32_t> mDistance;
     std::vector<std::uint32_t> mQueue;
-    std::vector<std::uint8_t> mFineTouched;
+    std::vector<std::uint16_t> mFineTouched;
     std::vector<std::uint32_t> mPendingCells;
     std::vector<std::uint8_t> mCellQueued;
     std::vector<Entity> mAvatarEntities;
-    std::vector<glm::vec3> mAvatarPositions;
 };
 
 } // namespace qgi

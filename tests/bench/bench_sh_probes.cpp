@@ -59,9 +59,10 @@ struct BenchWorld {
         probes = std::make_unique<ShProbeSystem>(probeSettings);
         probes->build(registry);
         step(false);
-        registry.view<const MobileMesh, const Name>().each([&](Entity e, const MobileMesh&, const Name& n) {
-            if (n.value == "cart") cart = e;
-        });
+        registry.view<const MobileMesh, const Name>().each(
+            [&](Entity e, const MobileMesh&, const Name& n) {
+                if (n.value == "cart") cart = e;
+            });
         rest = registry.get<WorldTransform>(cart).matrix;
     }
 
@@ -91,8 +92,10 @@ void ProbeUpdate(benchmark::State& state) {
     BenchWorld& w = world(state.range(0) != 0);
     const std::size_t count = w.registry.ctx().get<ProbeVolume>().probeCount();
     std::vector<std::uint32_t> batch;
-    for (std::size_t i = 0; i < 64; ++i) batch.push_back(std::uint32_t(i * count / 64));
-    for (auto _ : state) w.probes->projectProbes(w.registry, batch);
+    for (std::size_t i = 0; i < 64; ++i)
+        batch.push_back(std::uint32_t(i * count / 64));
+    for (auto _ : state)
+        w.probes->projectProbes(w.registry, batch);
     state.SetItemsProcessed(std::int64_t(state.iterations()) * 64);
     state.counters["rays_per_probe"] = double(w.probes->settings().raysPerProbe);
 }
@@ -100,7 +103,8 @@ BENCHMARK(ProbeUpdate)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTi
 
 void FullRefresh(benchmark::State& state) {
     BenchWorld& w = world(true);
-    for (auto _ : state) w.probes->projectAll(w.registry);
+    for (auto _ : state)
+        w.probes->projectAll(w.registry);
     state.counters["probes"] = double(w.registry.ctx().get<ProbeVolume>().probeCount());
 }
 BENCHMARK(FullRefresh)->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -134,7 +138,13 @@ void MovingMobile(benchmark::State& state) {
     w.probes->build(w.registry);
     w.probes->projectAll(w.registry);
 }
-BENCHMARK(MovingMobile)->Arg(8)->Arg(32)->Arg(128)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(60);
+BENCHMARK(MovingMobile)
+    ->Arg(8)
+    ->Arg(32)
+    ->Arg(128)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(60);
 
 std::vector<glm::vec3> avatarPositions(std::size_t count) {
     // Avatar centres over the ground floor and the upper gallery, 0.875 m above each.
@@ -168,7 +178,8 @@ void AvatarLookups(benchmark::State& state) {
         benchmark::DoNotOptimize(sum);
     }
     state.SetItemsProcessed(std::int64_t(state.iterations()) * state.range(0));
-    for (const Entity e : avatars) w.registry.destroy(e);
+    for (const Entity e : avatars)
+        w.registry.destroy(e);
 }
 BENCHMARK(AvatarLookups)->Arg(10'000)->Unit(benchmark::kMicrosecond);
 
@@ -182,9 +193,11 @@ void LightAvatars(benchmark::State& state) {
         avatars.push_back(e);
     }
     w.probes->lightAvatars(w.registry); // warm: lattices and ShLighting components exist
-    for (auto _ : state) w.probes->lightAvatars(w.registry);
+    for (auto _ : state)
+        w.probes->lightAvatars(w.registry);
     state.SetItemsProcessed(std::int64_t(state.iterations()) * state.range(0));
-    for (const Entity e : avatars) w.registry.destroy(e);
+    for (const Entity e : avatars)
+        w.registry.destroy(e);
 }
 BENCHMARK(LightAvatars)->Arg(10'000)->Unit(benchmark::kMicrosecond);
 

@@ -55,9 +55,10 @@ void fillVertexIrradianceFromReference(Registry& world, const RayScene& scene) {
     settings.seed = 11;
     const reference::IrradianceReference ref(world, scene, settings);
     std::vector<Entity> entities;
-    world.view<const Mesh, const WorldTransform>().each([&](Entity e, const Mesh&, const WorldTransform&) {
-        if (world.has<StaticMesh>(e) || world.has<MobileMesh>(e)) entities.push_back(e);
-    });
+    world.view<const Mesh, const WorldTransform>().each(
+        [&](Entity e, const Mesh&, const WorldTransform&) {
+            if (world.has<StaticMesh>(e) || world.has<MobileMesh>(e)) entities.push_back(e);
+        });
     for (const Entity e : entities) {
         const Mesh& mesh = world.get<Mesh>(e);
         const glm::mat4& m = world.get<WorldTransform>(e).matrix;
@@ -72,21 +73,23 @@ void fillVertexIrradianceFromReference(Registry& world, const RayScene& scene) {
         const auto estimates = ref.estimate(xs, ns);
         VertexIrradiance& vi = world.emplaceOrReplace<VertexIrradiance>(e);
         vi.irradiance.clear();
-        for (const auto& est : estimates) vi.irradiance.push_back(glm::vec3(est.mean));
+        for (const auto& est : estimates)
+            vi.irradiance.push_back(glm::vec3(est.mean));
     }
 }
 
 TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
     Registry world;
-    buildBuiltinScene(world, "cornell", SceneOptions{0.04f}); // 4 cm triangles: a quarter of the vertices
+    buildBuiltinScene(world, "cornell",
+                      SceneOptions{0.04f}); // 4 cm triangles: a quarter of the vertices
     RayScene& scene = world.ctx().emplace<RayScene>();
     scene.build(world);
     fillVertexIrradianceFromReference(world, scene);
 
     ShProbeSettings settings;
-    settings.spacing = 0.07f;   // about the avatar's size
+    settings.spacing = 0.07f; // about the avatar's size
     settings.raysPerProbe = 2048;
-    settings.hybrid = false;    // photon mode: the luminaire's light arrives as emission
+    settings.hybrid = false; // photon mode: the luminaire's light arrives as emission
     ShProbeSystem system(settings);
     system.build(world);
     system.projectAll(world);
@@ -96,8 +99,10 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
     // Sphere centres in free space: above the short block, high in the middle, low in the
     // front-left corner where the scene's avatar walks, behind the short block. Each is
     // taken as given (off the nodes) and at its nearest probe node.
-    const glm::vec3 bases[] = {{0.09f, 0.30f, -0.17f}, {0.f, 0.40f, -0.28f},
-                               {-0.20f, 0.10f, -0.10f}, {0.20f, 0.25f, -0.40f}};
+    const glm::vec3 bases[] = {{0.09f, 0.30f, -0.17f},
+                               {0.f, 0.40f, -0.28f},
+                               {-0.20f, 0.10f, -0.10f},
+                               {0.20f, 0.25f, -0.40f}};
     struct Point {
         glm::vec3 x;
         bool node;
@@ -113,7 +118,8 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
         points.push_back({grid.position(node), true});
     }
     std::vector<glm::vec3> normals;
-    for (std::uint32_t k = 0; k < kNormals; ++k) normals.push_back(sh::fibonacciDirection(k, kNormals));
+    for (std::uint32_t k = 0; k < kNormals; ++k)
+        normals.push_back(sh::fibonacciDirection(k, kNormals));
 
     std::vector<glm::vec3> xs, ns;
     for (const Point& p : points)
@@ -138,7 +144,8 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
             glm::vec3 lo(1e30f), hi(-1e30f);
             for (int c = 0; c < 8; ++c)
                 if (blend.weights[c] > 0.f) {
-                    const glm::vec3 corner = sh::irradiance(volume.coefficients(blend.probes[c]), n);
+                    const glm::vec3 corner =
+                        sh::irradiance(volume.coefficients(blend.probes[c]), n);
                     lo = glm::min(lo, corner);
                     hi = glm::max(hi, corner);
                 }
@@ -147,8 +154,8 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
                 const double r = ref[k].mean[c], se = ref[k].standardError[c];
                 const double bound = 4.0 * se + truncation[c] + spread[c] + kInputAllowance * r;
                 EXPECT_NEAR(e[c], r, bound) << "point " << p.x.x << "," << p.x.y << "," << p.x.z
-                                            << (p.node ? " (node)" : "") << " normal " << n.x
-                                            << "," << n.y << "," << n.z << " channel " << c;
+                                            << (p.node ? " (node)" : "") << " normal " << n.x << ","
+                                            << n.y << "," << n.z << " channel " << c;
                 sumProbe[c] += e[c];
                 sumRef[c] += r;
                 varRef[c] += se * se;
@@ -160,10 +167,11 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
             const double meanProbe = sumProbe[c] / kNormals, meanRef = sumRef[c] / kNormals;
             const double bound = 4.0 * std::sqrt(varRef[c]) / kNormals + kInputAllowance * meanRef +
                                  sumSpread[c] / kNormals;
-            EXPECT_NEAR(meanProbe, meanRef, bound)
-                << "normal-averaged, point " << p.x.x << "," << p.x.y << "," << p.x.z << " channel " << c;
+            EXPECT_NEAR(meanProbe, meanRef, bound) << "normal-averaged, point " << p.x.x << ","
+                                                   << p.x.y << "," << p.x.z << " channel " << c;
             std::printf("point (%.3f %.3f %.3f)%s ch%d: mean E probe %.3f ref %.3f (bound %.3f)\n",
-                        p.x.x, p.x.y, p.x.z, p.node ? " node" : "     ", c, meanProbe, meanRef, bound);
+                        p.x.x, p.x.y, p.x.z, p.node ? " node" : "     ", c, meanProbe, meanRef,
+                        bound);
         }
     }
 }

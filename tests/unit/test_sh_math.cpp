@@ -21,7 +21,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 double factorial(int n) {
     double f = 1.0;
-    for (int k = 2; k <= n; ++k) f *= k;
+    for (int k = 2; k <= n; ++k)
+        f *= k;
     return f;
 }
 
@@ -92,7 +93,8 @@ double integrate(const std::function<double(const glm::dvec3&)>& f, int n = 200)
 
 std::vector<glm::vec3> testDirections() {
     std::vector<glm::vec3> d;
-    for (std::uint32_t i = 0; i < 40; ++i) d.push_back(sh::fibonacciDirection(i, 40));
+    for (std::uint32_t i = 0; i < 40; ++i)
+        d.push_back(sh::fibonacciDirection(i, 40));
     d.push_back({1.f, 0.f, 0.f});
     d.push_back({0.f, 1.f, 0.f});
     d.push_back({0.f, 0.f, 1.f});
@@ -144,17 +146,20 @@ TEST(ShMath, IrradianceOfEachBasisFunctionIsItsCosineConvolution) {
     // quadrature with the textbook Y_i. Each index exercises its own constants (c4: 0; c2:
     // 1-3; c1: 4, 5, 7, 8; c3 and c5: 6, isolated below), so one wrong or misplaced constant
     // fails its own index.
-    const std::vector<glm::vec3> normals = {
-        {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, {0.f, 1.f, 0.f},
-        glm::normalize(glm::vec3(1.f, 1.f, 0.f)), glm::normalize(glm::vec3(0.3f, -0.8f, 0.5f)),
-        glm::normalize(glm::vec3(-0.6f, 0.2f, -0.7f))};
+    const std::vector<glm::vec3> normals = {{0.f, 0.f, 1.f},
+                                            {1.f, 0.f, 0.f},
+                                            {0.f, 1.f, 0.f},
+                                            glm::normalize(glm::vec3(1.f, 1.f, 0.f)),
+                                            glm::normalize(glm::vec3(0.3f, -0.8f, 0.5f)),
+                                            glm::normalize(glm::vec3(-0.6f, 0.2f, -0.7f))};
     for (int i = 0; i < 9; ++i) {
         sh::ShRgb L{};
         L[i] = glm::vec3(1.f);
         for (const glm::vec3& n : normals) {
             const glm::dvec3 nd(n);
-            const double expected = integrate(
-                [&](const glm::dvec3& w) { return textbookY(i, w) * std::max(0.0, glm::dot(nd, w)); });
+            const double expected = integrate([&](const glm::dvec3& w) {
+                return textbookY(i, w) * std::max(0.0, glm::dot(nd, w));
+            });
             EXPECT_NEAR(sh::irradiance(L, n).x, expected, 5e-4)
                 << "coefficient " << i << " normal " << n.x << "," << n.y << "," << n.z;
         }
@@ -176,7 +181,8 @@ TEST(ShMath, ConstantEnvironmentGivesPiTimesRadiance) {
     for (const glm::vec3& d : testDirections()) {
         const glm::vec3 e = sh::irradiance(L, d);
         for (int c = 0; c < 3; ++c)
-            EXPECT_NEAR(e[c], glm::pi<float>() * radiance[c], 2e-3f * glm::pi<float>() * radiance[c]);
+            EXPECT_NEAR(e[c], glm::pi<float>() * radiance[c],
+                        2e-3f * glm::pi<float>() * radiance[c]);
     }
     // Tolerance 2e-3 relative: float accumulation over 20k samples (n x 2^-24 = 1.2e-3 at worst).
     for (int c = 0; c < 3; ++c)
@@ -197,7 +203,8 @@ TEST(ShMath, DirectionalSourceMatchesItsLegendreSeries) {
     for (const glm::vec3& n : testDirections()) {
         const double c = glm::dot(n, toward);
         const glm::vec3 e = sh::irradiance(L, n);
-        for (int k = 0; k < 3; ++k) EXPECT_NEAR(e[k], e0[k] * truncatedDirectional(c), 1e-5 * e0[k]);
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(e[k], e0[k] * truncatedDirectional(c), 1e-5 * e0[k]);
     }
     // Facing the source: 17/16 of the true irradiance.
     EXPECT_NEAR(sh::irradiance(L, toward).x, 2.0 * 17.0 / 16.0, 1e-5);
@@ -223,8 +230,11 @@ TEST(ShMath, DirectionalErrorStaysWithinTheKnownBound) {
     EXPECT_NEAR(meanError, sh::kDirectionalMeanError, 2e-4);
 
     // The mean from the antiderivative of |g|, g(c) = (15c^2 -+ 16c + 3)/32 on each half.
-    const auto primitive = [](double c, double s) { return (5 * c * c * c + s * 8 * c * c + 3 * c) / 32; };
-    const double r1 = (16 - std::sqrt(76.0)) / 30, r2 = (16 + std::sqrt(76.0)) / 30; // roots on [0,1]
+    const auto primitive = [](double c, double s) {
+        return (5 * c * c * c + s * 8 * c * c + 3 * c) / 32;
+    };
+    const double r1 = (16 - std::sqrt(76.0)) / 30,
+                 r2 = (16 + std::sqrt(76.0)) / 30; // roots on [0,1]
     const auto half = [&](double s) { // integral of |g| over [0, 1] (s = -1) or [-1, 0] mirrored
         return std::abs(primitive(r1, s) - primitive(0, s)) +
                std::abs(primitive(r2, s) - primitive(r1, s)) +
@@ -243,10 +253,11 @@ TEST(ShMath, ClampedCosineLobe) {
     const std::uint32_t n = 200000;
     for (std::uint32_t k = 0; k < n; ++k) {
         const glm::vec3 w = sh::fibonacciDirection(k, n);
-        sh::addSample(L, w, glm::vec3(std::max(0.f, glm::dot(d, w))), 4.f * glm::pi<float>() / float(n));
+        sh::addSample(L, w, glm::vec3(std::max(0.f, glm::dot(d, w))),
+                      4.f * glm::pi<float>() / float(n));
     }
-    static constexpr double kA[9] = {kPi, 2 * kPi / 3, 2 * kPi / 3, 2 * kPi / 3, kPi / 4,
-                                     kPi / 4, kPi / 4, kPi / 4, kPi / 4};
+    static constexpr double kA[9] = {kPi,     2 * kPi / 3, 2 * kPi / 3, 2 * kPi / 3, kPi / 4,
+                                     kPi / 4, kPi / 4,     kPi / 4,     kPi / 4};
     for (int i = 0; i < 9; ++i)
         EXPECT_NEAR(L[i].x, kA[i] * textbookY(i, glm::dvec3(d)), 2e-4) << "coefficient " << i;
     for (const glm::vec3& normal : testDirections()) {
