@@ -3,8 +3,8 @@
 #include "components/DirectionalLight.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
-#include "components/MobileMesh.h"
 #include "components/LightStandIn.h"
+#include "components/MobileMesh.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -110,6 +110,23 @@ void prepareSurface(const Registry& registry, PhotonEmitter& emitter) {
         emitter.triangleCdf.push_back(float(area));
     }
     if (emitter.triangles.empty()) return disable(emitter, "Mesh", "has no triangle with area");
+    // A stand-in at the surface's place: hybrid mode's renderer draws the lamp's direct light.
+    Aabb bounds;
+    for (const PhotonEmitter::Triangle& t : emitter.triangles) {
+        bounds.extend(t.corner);
+        bounds.extend(t.corner + t.edge1);
+        bounds.extend(t.corner + t.edge2);
+    }
+    const glm::vec3 reach(std::max(0.05f, 0.25f * glm::length(bounds.extent())));
+    const Aabb place{bounds.min - reach, bounds.max + reach};
+    registry.view<const LightStandIn, const WorldTransform>().each(
+        [&](Entity light, const LightStandIn&, const WorldTransform& world) {
+            const bool punctual = registry.has<PointLight>(light) || registry.has<SpotLight>(light);
+            const glm::vec3 at(world.matrix[3]);
+            if (punctual && glm::all(glm::greaterThanEqual(at, place.min)) &&
+                glm::all(glm::lessThanEqual(at, place.max)))
+                emitter.directDrawn = true;
+        });
     for (float& c : emitter.triangleCdf)
         c = float(double(c) / area);
     emitter.triangleCdf.back() = 1.f;
@@ -168,6 +185,7 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
                        emitter.kind == EmitterKind::Surface ? "emission" : "colour x intensity",
                        "is negative or not finite");
     emitter.position = glm::vec3(emitter.world[3]);
+    emitter.directDrawn = emitter.kind != EmitterKind::Surface; // prepareSurface decides
     switch (emitter.kind) {
     case EmitterKind::Point:
         emitter.power = 4.f * glm::pi<float>() * emitter.radiant;
