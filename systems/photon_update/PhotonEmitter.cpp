@@ -11,6 +11,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/scene/SceneQueries.h"
 
 #include <glm/gtc/constants.hpp>
 #include <glm/matrix.hpp>
@@ -111,22 +112,7 @@ void prepareSurface(const Registry& registry, PhotonEmitter& emitter) {
     }
     if (emitter.triangles.empty()) return disable(emitter, "Mesh", "has no triangle with area");
     // A stand-in at the surface's place: hybrid mode's renderer draws the lamp's direct light.
-    Aabb bounds;
-    for (const PhotonEmitter::Triangle& t : emitter.triangles) {
-        bounds.extend(t.corner);
-        bounds.extend(t.corner + t.edge1);
-        bounds.extend(t.corner + t.edge2);
-    }
-    const glm::vec3 reach(std::max(0.05f, 0.25f * glm::length(bounds.extent())));
-    const Aabb place{bounds.min - reach, bounds.max + reach};
-    registry.view<const LightStandIn, const WorldTransform>().each(
-        [&](Entity light, const LightStandIn&, const WorldTransform& world) {
-            const bool punctual = registry.has<PointLight>(light) || registry.has<SpotLight>(light);
-            const glm::vec3 at(world.matrix[3]);
-            if (punctual && glm::all(glm::greaterThanEqual(at, place.min)) &&
-                glm::all(glm::lessThanEqual(at, place.max)))
-                emitter.directDrawn = true;
-        });
+    emitter.directDrawn = hasLightStandIn(registry, emitter.entity);
     for (float& c : emitter.triangleCdf)
         c = float(double(c) / area);
     emitter.triangleCdf.back() = 1.f;

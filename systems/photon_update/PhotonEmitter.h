@@ -63,8 +63,8 @@ struct PhotonEmitter {
     std::vector<Triangle> triangles; ///< surface: triangles with non-zero area
     std::vector<float> triangleCdf;  ///< surface: cumulative area fraction, last entry 1
     /// Hybrid mode's renderer draws this light's direct light: always for point, spot and
-    /// directional lights; for a surface, when a punctual light tagged LightStandIn sits within
-    /// its bounds (widened by a quarter of their diagonal, at least 5 cm) as prepared.
+    /// directional lights; for a surface, when it has a LightStandIn (hasLightStandIn) as
+    /// prepared.
     bool directDrawn = false;
 
     // ---- photons (the system's allocation) ---------------------------------------------------

@@ -16,6 +16,7 @@
 #include "runtime/core/Log.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/common.hpp>
@@ -140,6 +141,10 @@ void ShProbeSystem::snapshot(const Registry& registry) {
         const Material m = material ? *material : Material{};
         s.albedo = isFinite(m.baseColor) ? glm::clamp(m.baseColor, 0.f, 1.f) : glm::vec3(0.f);
         s.emission = isFinite(m.emission) ? glm::max(m.emission, 0.f) : glm::vec3(0.f);
+        // Hybrid mode: a lamp with a stand-in reaches avatars through the shader's direct
+        // light; seen by the probes too, it would count twice.
+        if (mSettings.hybrid && s.emission != glm::vec3(0.f) && hasLightStandIn(registry, e))
+            s.emission = glm::vec3(0.f);
         s.indices = mesh.indices.data();
         s.indexCount = mesh.indices.size();
         const VertexIrradiance* irradiance = registry.tryGet<VertexIrradiance>(e);

@@ -5,6 +5,7 @@
 #include "systems/sh_probes/ProbeVolume.h"
 #include "systems/sh_probes/ShProbeSystem.h"
 
+#include "components/LightStandIn.h"
 #include "components/Avatar.h"
 #include "components/DirectionalLight.h"
 #include "components/ShLighting.h"
@@ -186,6 +187,23 @@ TEST(ShProbes, EmissiveFloorGivesPiLFromBelow) {
         EXPECT_NEAR(down[c], glm::pi<float>() * glow.emission[c],
                     0.02f * glm::pi<float>() * glow.emission[c]);
         EXPECT_NEAR(up[c], 0.f, 0.02f * glm::pi<float>() * glow.emission[c]);
+    }
+}
+
+TEST(ShProbes, HybridProbesDoNotSeeALampTheShaderDrawsThroughItsStandIn) {
+    // The emissive floor with a stand-in bulb at its place: in hybrid mode the avatar shader
+    // draws the lamp through the bulb, so the probes leave its emission out (in photon mode
+    // the bulb is dark and the probes must see the lamp).
+    Material glow = grey(0.f);
+    glow.emission = {2.f, 1.f, 0.5f};
+    for (const bool hybrid : {false, true}) {
+        FloorScene scene(floorSettings(hybrid), glow);
+        const Entity bulb = test::addPointLight(scene.world, {0.f, -0.5f, 0.f}, 1.f);
+        scene.world.emplace<LightStandIn>(bulb);
+        scene.run();
+        const glm::vec3 down = scene.irradiance({0.f, -1.f, 0.f});
+        if (hybrid) EXPECT_NEAR(down.x, 0.f, 1e-4f); // the bulb is below the floor: no light
+        else EXPECT_NEAR(down.x, glm::pi<float>() * 2.f, 0.02f * glm::pi<float>() * 2.f);
     }
 }
 
