@@ -15,6 +15,7 @@
 #include "runtime/scene/SceneLoader.h"
 #include "systems/frame/FrameSchedule.h"
 #include "systems/vlf/VlfScene.h"
+#include "systems/sh_probes/AvatarShExport.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -114,6 +115,8 @@ int runDemo(const DemoOptions& options) {
             vlf.cacheFile = options.vlfCache;
         frameSettings.vlf = vlf;
     }
+    frameSettings.probes->hybrid = options.mode == "hybrid";
+    frameSettings.probes->seed = options.seed;
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();
     render.height = window.height();
@@ -165,6 +168,11 @@ int runDemo(const DemoOptions& options) {
         ensureParentDirectory(*options.exportIrradiance);
         exportVertexIrradiance(world, *options.exportIrradiance);
         logInfo("wrote ", *options.exportIrradiance);
+    }
+    if (options.exportAvatars) {
+        ensureParentDirectory(*options.exportAvatars);
+        exportAvatarSh(world, *options.exportAvatars);
+        logInfo("wrote ", *options.exportAvatars);
     }
     if (options.profile) {
         ensureParentDirectory(*options.profile);

@@ -83,6 +83,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         ->check(CLI::Range(8, 1024));
     app.add_option("--vlf-cache", o.vlfCache,
                    "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)");
+    app.add_option("--export-avatars", o.exportAvatars,
+                   "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
+                   "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
+                   "real basis over world x, y, z)");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
 
     try {

@@ -31,6 +31,7 @@ struct DemoOptions {
     int vlfLevel = 4;              ///< VLF directions: 2 * 4^level + 1 (4: 513)
     int vlfLines = 64;             ///< VLF lines per subfield side
     std::string vlfCache = "auto"; ///< VLF cache file; "auto": <scene>.vlf in the working folder, "none": no file
+    std::optional<std::string> exportAvatars;    ///< .csv path: avatars' SH after the last frame
     bool quiet = false;
 };
 

@@ -3,6 +3,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
+#include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonPathGrid.h"
@@ -13,10 +14,10 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 namespace qgi {
 namespace {
@@ -113,7 +114,7 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     if (!store || !delta) return;
     mSkipsDirect.assign(store->lights.size(), 0);
     for (std::size_t l = 0; l < store->lights.size(); ++l)
-        mSkipsDirect[l] = mSettings.hybrid && store->lights[l].punctual;
+        mSkipsDirect[l] = mSettings.hybrid && store->lights[l].directDrawn;
     collectMovedMobiles(registry, *delta);
     const bool full = delta->full || mNeedsFull;
     mNeedsFull = false;
@@ -160,7 +161,7 @@ void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const P
 
 bool DetpIrradianceSystem::counted(const PhotonSegments& segments, std::size_t s,
                                    std::uint16_t light) const {
-    // A path naming a light the store does not list is treated as a punctual light's.
+    // A path naming a light the store does not list is treated as one the renderer draws.
     return segments.bounce[s] != 0 || !mSettings.hybrid ||
            (light < mSkipsDirect.size() && !mSkipsDirect[light]);
 }
@@ -266,7 +267,8 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
     for (std::size_t i = 0; i < delta.paths.size(); ++i) {
         std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
         const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
-        // Not counted (hybrid mode, a punctual light's first segment): skipped on both sides.
+        // Not counted (hybrid mode, first segment of a light the renderer draws): skipped on
+        // both sides.
         const std::uint16_t light = store.paths[delta.paths[i]].light;
         if (o < oldEnd && !counted(before, o, light)) ++o;
         if (n < newEnd && !counted(after, n, light)) ++n;
@@ -314,7 +316,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         return;
     }
 
-    const auto start = std::chrono::steady_clock::now();
+    FrameProfiler* profiler = registry.ctx().find<FrameProfiler>();
+    std::optional<StageTimer> timer(std::in_place, profiler, "delta", mStats.deltaMs);
     mTouched.clear();
     if (!delta.paths.empty()) {
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
@@ -347,8 +350,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);
     mStats.verticesWritten = mTouched.size();
-    const auto moved = std::chrono::steady_clock::now();
-    mStats.deltaMs = std::chrono::duration<double, std::milli>(moved - start).count();
+    timer.emplace(profiler, "mobiles", mStats.mobileMs);
 
     for (const std::uint32_t r : mMoved) {
         estimateMobile(registry, store, r);
@@ -356,8 +358,6 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mStats.verticesWritten += receivers[r].vertexCount;
     }
     mStats.movedMobiles = mMoved.size();
-    mStats.mobileMs =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - moved).count();
 }
 
 // ---- impact count -------------------------------------------------------------------------

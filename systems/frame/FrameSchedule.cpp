@@ -2,6 +2,7 @@
 
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
 
 namespace qgi {
 
@@ -24,6 +25,13 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.vlf");
         mVlf->build(registry);
     }
+    // A scene without meshes has no bounds to lay probes over (and nothing to light them).
+    const SceneInfo* info = registry.ctx().find<SceneInfo>();
+    if (settings.probes && info && !info->bounds.empty()) {
+        mProbes = std::make_unique<ShProbeSystem>(*settings.probes);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.probes");
+        mProbes->build(registry);
+    }
     if (settings.render) mRender = std::make_unique<RenderSystem>(*settings.render);
 
     mSchedule.addPhase("input")
@@ -32,6 +40,7 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         .addPhase("raytrace.sync")
         .addPhase("photon.update")
         .addPhase("detp.irradiance")
+        .addPhase("sh.probes")
         .addPhase("render");
 
     mSchedule.add("animation", "animation",
@@ -47,6 +56,9 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         mSchedule.add("detp.irradiance", "detp.irradiance",
                       [this](Registry& r, const FrameContext& f) { mIrradiance->update(r, f); });
     }
+    if (mProbes)
+        mSchedule.add("sh.probes", "sh.probes",
+                      [this](Registry& r, const FrameContext& f) { mProbes->update(r, f); });
     if (mRender)
         mSchedule.add("render", "render",
                       [this](Registry& r, const FrameContext& f) { mRender->update(r, f); });

@@ -6,6 +6,7 @@
 #include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/render/RenderSystem.h"
+#include "systems/sh_probes/ShProbeSystem.h"
 #include "systems/transform/TransformSystem.h"
 #include "systems/vlf/VlfSystem.h"
 
@@ -18,6 +19,9 @@ struct FrameSettings {
     /// Photon transport and per-vertex irradiance; off: no global illumination (direct only).
     std::optional<PhotonSettings> photons = PhotonSettings{};
     DetpSettings irradiance;
+    /// SH probe volume lighting the avatars; off: avatars keep whatever ShLighting they have.
+    /// Set `hybrid` to match the render mode.
+    std::optional<ShProbeSettings> probes = ShProbeSettings{};
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
     std::optional<RenderSettings> render = RenderSettings{};
     /// Virtual Light Field of the static scene for glossy and mirror surfaces: baked (or
@@ -34,9 +38,11 @@ struct FrameSettings {
  *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
  *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
  *    (vlf: baked or loaded at construction; static, so no per-frame entry)
+ *    sh.probes         stale probes re-projected within a budget; every avatar's ShLighting
  *    render            uploads dirty ranges, draws, tonemaps
  *
- *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
+ *  Construction creates the world resources the systems share (RayScene, FrameProfiler,
+ *  ProbeVolume when the scene has a SceneInfo)
  *  unless the registry already holds them. Systems never call each other.               */
 class FrameSchedule {
 public:
@@ -47,6 +53,7 @@ public:
     RenderSystem* renderer() { return mRender.get(); }
     PhotonUpdateSystem* photons() { return mPhotons.get(); }
     DetpIrradianceSystem* irradiance() { return mIrradiance.get(); }
+    ShProbeSystem* probes() { return mProbes.get(); }
 
 private:
     Schedule mSchedule;
@@ -54,6 +61,7 @@ private:
     TransformSystem mTransform;
     std::unique_ptr<PhotonUpdateSystem> mPhotons;
     std::unique_ptr<DetpIrradianceSystem> mIrradiance;
+    std::unique_ptr<ShProbeSystem> mProbes;
     std::unique_ptr<RenderSystem> mRender;
     std::unique_ptr<VlfSystem> mVlf;
 };

@@ -42,6 +42,19 @@ std::pair<float, float> clipToBox(const glm::vec3& o, const glm::vec3& d, float 
     return {near, far};
 }
 
+/// Coordinate of the end of origin + t direction, t in [0, length], along one axis
+/// (length +inf: the ray's limit, +-inf or the origin's own coordinate).
+float endCoordinate(float origin, float direction, float length) {
+    if (std::isfinite(length)) return origin + length * direction;
+    if (direction == 0.f) return origin;
+    return direction > 0.f ? std::numeric_limits<float>::infinity()
+                           : -std::numeric_limits<float>::infinity();
+}
+
+// A segment counts as reaching beyond a side when it comes within this many cells of it:
+// queries are widened by as much (pathsOverlapping), so rounding never loses a path.
+constexpr float kSideSlack = 2e-3f;
+
 bool overlaps(const Aabb& a, const Aabb& b) {
     return !a.empty() && !b.empty() && glm::all(glm::lessThanEqual(a.min, b.max)) &&
            glm::all(glm::lessThanEqual(b.min, a.max));
@@ -59,8 +72,8 @@ std::uint32_t PhotonPathGrid::Marks::nextToken() {
 
 PhotonPathGrid::Marks& PhotonPathGrid::localMarks() const {
     Marks& marks = mMarks.local();
-    if (marks.mark.size() != cellCount() + 1) {
-        marks.mark.assign(cellCount() + 1, 0u);
+    if (marks.mark.size() != cellCount() + kSideCells) {
+        marks.mark.assign(cellCount() + kSideCells, 0u);
         marks.token = 0;
     }
     return marks;
@@ -105,8 +118,15 @@ void PhotonPathGrid::walkLine(const glm::vec3& a, const glm::vec3& b, Fn& fn) co
     }
 }
 
+std::uint8_t PhotonPathGrid::sidesBeyond(float a, float b, float lo, float hi, int axis) {
+    std::uint8_t sides = 0;
+    if (std::min(a, b) < lo) sides |= sideBit(axis, false);
+    if (std::max(a, b) > hi) sides |= sideBit(axis, true);
+    return sides;
+}
+
 /// Visits the cells of segments [first, first + count): the cells their part inside the box
-/// crosses, and the outside cell when part of a segment lies beyond the box.
+/// crosses, and the side cell of each side of the box a segment reaches beyond.
 template <typename Fn>
 void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t first,
                                  std::size_t count, Fn&& fn) const {
@@ -127,9 +147,15 @@ void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t fir
                 continue;
             }
         }
-        // Clip to the box; whatever is cut off lies outside.
+        // Clip to the box; whatever is cut off lies beyond one side or more.
         const auto [near, far] = clipToBox(o, d, length, glm::vec3(0.f), size);
-        fn(outsideCell());
+        for (int axis = 0; axis < 3; ++axis) {
+            const float end = endCoordinate(o[axis], d[axis], length);
+            const std::uint8_t sides =
+                sidesBeyond(o[axis], end, kSideSlack, size[axis] - kSideSlack, axis);
+            for (const bool high : {false, true})
+                if (sides & sideBit(axis, high)) fn(outsideCell() + sideIndex(axis, high));
+        }
         if (near <= far)
             walkLine(glm::clamp(o + near * d, glm::vec3(0.f), size),
                      glm::clamp(o + far * d, glm::vec3(0.f), size), fn);
@@ -138,7 +164,7 @@ void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t fir
 
 void PhotonPathGrid::indexChunk(const PhotonStore& store, Chunk& chunk) const {
     Marks& marks = localMarks();
-    const std::size_t cells = cellCount() + 1; // and the outside cell
+    const std::size_t cells = cellCount() + kSideCells;
     // Calls fn(cell) once for each distinct cell of path p.
     const auto walkPath = [&](std::uint32_t p, auto&& fn) {
         const std::uint32_t token = marks.nextToken();
@@ -164,8 +190,12 @@ void PhotonPathGrid::indexChunk(const PhotonStore& store, Chunk& chunk) const {
 
 void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::uint32_t resolution) {
     QGI_ASSERT(!bounds.empty() && resolution > 0, "the path grid needs a box and cells");
-    // A margin keeps geometry on the box's faces strictly inside it.
-    const glm::vec3 margin = 0.01f * bounds.extent() + 1e-4f;
+    // A margin keeps geometry on the box's faces strictly inside it, and the query boxes
+    // around what rests on them (a mobile on the floor, its DETP discs reaching r below)
+    // inside the grid too, away from the side cells (which in an open scene list nearly
+    // every path).
+    const glm::vec3 extent0 = bounds.extent();
+    const glm::vec3 margin(0.05f * std::max({extent0.x, extent0.y, extent0.z}) + 1e-4f);
     mBounds = {bounds.min - margin, bounds.max + margin};
     const glm::vec3 extent = mBounds.extent();
     mCellSize = std::max({extent.x, extent.y, extent.z}) / float(resolution);
@@ -174,7 +204,7 @@ void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::ui
     mPathCount = store.pathCount();
 
     // Chunks hold whole 64-bit words of the query bitmap, so queries mark them in parallel.
-    const std::size_t cells = cellCount() + 2;
+    const std::size_t cells = cellCount() + kSideCells + 1;
     mChunkPaths =
         std::max(kChunkPaths, (mPathCount * cells + kMaxChunkOffsets - 1) / kMaxChunkOffsets);
     mChunkPaths = (mChunkPaths + 63) / 64 * 64;
@@ -200,7 +230,11 @@ PhotonPathGrid::Extent PhotonPathGrid::extentOf(const PhotonStore& store, std::u
         const glm::vec3& d = store.segments.direction[s];
         const float length = store.segments.length[s];
         const auto [near, far] = clipToBox(o, d, length, mBounds.min, mBounds.max);
-        if (near > 0.f || far < length) extent.outside = true;
+        if (near > 0.f || far < length)
+            for (int axis = 0; axis < 3; ++axis)
+                extent.outside |= sidesBeyond(o[axis], endCoordinate(o[axis], d[axis], length),
+                                              mBounds.min[axis] + kSideSlack * mCellSize,
+                                              mBounds.max[axis] - kSideSlack * mCellSize, axis);
         if (near > far) continue;
         extent.box.extend(o + near * d);
         extent.box.extend(o + far * d);
@@ -283,8 +317,9 @@ void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
         if (box.empty()) continue;
         Query& q = mQueries.emplace_back();
         q.wide = {box.min - widen, box.max + widen};
-        q.outside = glm::any(glm::lessThan(q.wide.min, mBounds.min)) ||
-                    glm::any(glm::greaterThan(q.wide.max, mBounds.max));
+        for (int axis = 0; axis < 3; ++axis)
+            q.outside |= sidesBeyond(q.wide.min[axis], q.wide.max[axis], mBounds.min[axis],
+                                     mBounds.max[axis], axis);
         q.lo = cellOf(q.wide.min);
         q.hi = cellOf(q.wide.max);
     }
@@ -302,13 +337,15 @@ void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
                 for (int z = q.lo.z; z <= q.hi.z; ++z) // cells along x are consecutive: a row
                     for (int y = q.lo.y; y <= q.hi.y; ++y)
                         seeRange(cellIndex({q.lo.x, y, z}), cellIndex({q.hi.x, y, z}) + 1);
-                if (q.outside) seeRange(outsideCell(), outsideCell() + 1);
+                for (int side = 0; side < int(kSideCells); ++side)
+                    if (q.outside & (1u << side))
+                        seeRange(outsideCell() + side, outsideCell() + side + 1);
             }
         });
     });
     for (std::size_t i = 0; i < mChanged.size(); ++i)
         for (const Query& q : mQueries)
-            if ((q.outside && mChangedExtent[i].outside) ||
+            if ((q.outside & mChangedExtent[i].outside) != 0 ||
                 overlaps(mChangedExtent[i].box, q.wide)) {
                 see(mChanged[i]);
                 break;

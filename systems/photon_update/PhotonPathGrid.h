@@ -18,9 +18,12 @@ namespace qgi {
  *
  *  A uniform grid of cubic cells over the scene box (enlarged by a margin); each cell lists
  *  the paths with a segment crossing it (a 3D-DDA walk of each segment, one entry per path and
- *  cell). One more cell stands for everything outside the box: it lists the paths with a
- *  segment reaching beyond it (escaping photons, light from outside), and a query box that is
- *  not inside the grid gets it too, so queries are supersets anywhere in space.
+ *  cell). Six more cells stand for what lies outside the box, one per side of each axis: the
+ *  side cell "below y" lists the paths with a segment reaching below the box's bottom face
+ *  (escaping photons, light from outside), and a query box that pokes below that face gets it
+ *  too, so queries are supersets anywhere in space. One cell per side rather than one for all
+ *  outside: in an open scene nearly every path escapes through the sky, and a mobile resting
+ *  on the floor near the box's bottom face must not be handed all of them.
  *
  *  Re-traced paths: walking a re-traced path's old and new cells every frame costs more than
  *  re-tracing it, so a path that changes is only marked *changed*, with the bounding box of
@@ -82,14 +85,22 @@ private:
     struct Query {
         Aabb wide;
         glm::ivec3 lo{0}, hi{0};
-        bool outside = false; ///< reaches beyond the grid box
+        std::uint8_t outside = 0; ///< the sides of the grid box it reaches beyond (sideBit)
     };
-    /// A changed path's segments' extent: clipped to the grid box, plus whether any part of
-    /// them lies outside it.
+    /// A changed path's segments' extent: clipped to the grid box, plus the sides of the box
+    /// that any part of them reaches beyond (sideBit).
     struct Extent {
         Aabb box;
-        bool outside = false;
+        std::uint8_t outside = 0;
     };
+    /// Bit of side (axis, high) in the masks above; its cell is outsideCell() + that index.
+    static constexpr int sideIndex(int axis, bool high) { return 2 * axis + (high ? 1 : 0); }
+    static constexpr std::uint8_t sideBit(int axis, bool high) {
+        return std::uint8_t(1u << sideIndex(axis, high));
+    }
+    /// Sides of the box [lo, hi] that the coordinate range [a, b] (either order; infinite
+    /// ends allowed) reaches beyond along `axis`.
+    static std::uint8_t sidesBeyond(float a, float b, float lo, float hi, int axis);
 
     template <typename Fn>
     void forEachCell(const PhotonSegments& segments, std::size_t first, std::size_t count,
@@ -100,8 +111,9 @@ private:
     std::uint32_t cellIndex(const glm::ivec3& c) const {
         return std::uint32_t((c.z * mCells.y + c.y) * mCells.x + c.x);
     }
-    /// Cells of the box; the outside cell comes after them.
+    /// Cells of the box; the six side cells come after them.
     std::size_t cellCount() const { return std::size_t(mCells.x) * mCells.y * mCells.z; }
+    static constexpr std::size_t kSideCells = 6;
     std::uint32_t outsideCell() const { return std::uint32_t(cellCount()); }
     Marks& localMarks() const;
 

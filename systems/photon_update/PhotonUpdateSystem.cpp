@@ -6,6 +6,7 @@
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
+#include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -16,7 +17,6 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -123,14 +123,6 @@ bool testBit(const std::vector<std::uint64_t>& bits, std::uint32_t i) {
     return (bits[i >> 6] >> (i & 63)) & 1;
 }
 
-/// Milliseconds since `start`; restarts it.
-double lap(std::chrono::steady_clock::time_point& start) {
-    const auto now = std::chrono::steady_clock::now();
-    const double ms = std::chrono::duration<double, std::milli>(now - start).count();
-    start = now;
-    return ms;
-}
-
 } // namespace
 
 bool PhotonUpdateSystem::Mobile::sameFacet(std::uint32_t a, std::uint32_t b) const {
@@ -178,16 +170,21 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         return;
     }
 
-    auto clock = std::chrono::steady_clock::now();
-    scheduleReshoots();
-    mRelabels.clear();
-    findAffectedPaths(*scene, store, grid);
-    for (const Relabel& r : mRelabels)
-        store.segments.hitPrimitive[r.segment] = r.primitive;
-    mStats.findMs = lap(clock);
+    FrameProfiler* profiler = ctx.find<FrameProfiler>();
+    {
+        const StageTimer timer(profiler, "find", mStats.findMs);
+        scheduleReshoots();
+        mRelabels.clear();
+        findAffectedPaths(*scene, store, grid);
+        for (const Relabel& r : mRelabels)
+            store.segments.hitPrimitive[r.segment] = r.primitive;
+    }
     if (!mJobs.empty()) {
+        const StageTimer timer(profiler, "trace", mStats.traceMs);
         retrace(*scene, store, delta);
-        mStats.traceMs = lap(clock);
+    }
+    const StageTimer timer(profiler, "grid", mStats.gridMs);
+    if (!mJobs.empty()) {
         grid.markChanged(store, delta.paths);
         const std::size_t live = store.segments.size() - mGarbage;
         if (double(mGarbage) > double(mSettings.compactionFraction) * double(live)) {
@@ -200,7 +197,6 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     // would change again anyway.
     mStats.reindexedPaths =
         grid.refresh(store, mSettings.gridRefreshBudget, store.pathCount() / kIdleChangedRatio);
-    mStats.gridMs = lap(clock);
 }
 
 bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store) {
@@ -303,7 +299,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
         store.lights.push_back(
-            {e.entity, e.power, e.photonCount, e.kind != EmitterKind::Surface});
+            {e.entity, e.power, e.photonCount, e.directDrawn});
         store.emittedPower += e.power;
         store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
     }

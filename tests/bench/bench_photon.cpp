@@ -8,7 +8,8 @@
 //    irradiance, while the mobiles move 1 cm per frame (cornell: its block, 1M photons, photon
 //    mode; atrium: all four mobiles, 4M photons, hybrid mode), against FullReshoot/<scene>:
 //    the same frame with fullRecompute (every photon re-shot, every vertex re-estimated).
-//    Counters split the frame into its stages (ms per frame).
+//    Counters split the frame into its stages (ms per frame). The argument is the path grid's
+//    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 #include "components/Material.h"
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
@@ -35,6 +36,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace qgi {
@@ -59,12 +61,13 @@ struct PhotonWorld {
     std::vector<PhotonHead> heads;
     std::vector<Ray> segmentRays;
 
-    PhotonWorld(const std::string& name, bool fullRecompute) {
+    PhotonWorld(const std::string& name, bool fullRecompute, std::uint32_t gridResolution) {
         buildBuiltinScene(registry, name, SceneOptions{});
         registry.ctx().emplace<RayScene>().build(registry);
         PhotonSettings settings;
         settings.photonCount = photonsFor(name);
         settings.fullRecompute = fullRecompute;
+        if (gridResolution > 0) settings.gridResolution = gridResolution;
         // Photon mode on the cornell box: its luminaire, not the punctual stand-in.
         settings.punctualLights = name != "cornell";
         system = std::make_unique<PhotonUpdateSystem>(settings);
@@ -114,13 +117,18 @@ struct PhotonWorld {
     }
 };
 
-PhotonWorld& world(const std::string& name, bool fullRecompute = false) {
-    static std::map<std::pair<std::string, bool>, std::unique_ptr<PhotonWorld>> worlds;
-    const std::pair key(name, fullRecompute);
+/// gridResolution 0: the default PhotonSettings::gridResolution.
+PhotonWorld& world(const std::string& name, bool fullRecompute = false,
+                   std::uint32_t gridResolution = 0) {
+    static std::map<std::tuple<std::string, bool, std::uint32_t>, std::unique_ptr<PhotonWorld>>
+        worlds;
+    const std::tuple key(name, fullRecompute, gridResolution);
     auto it = worlds.find(key);
     if (it == worlds.end()) {
         worlds.clear(); // one world at a time: 4M photons take a few GiB
-        it = worlds.emplace(key, std::make_unique<PhotonWorld>(name, fullRecompute)).first;
+        it = worlds
+                 .emplace(key, std::make_unique<PhotonWorld>(name, fullRecompute, gridResolution))
+                 .first;
     }
     return *it->second;
 }
@@ -200,16 +208,16 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
     state.counters["candidates/frame"] = candidates / frames;
     state.counters["segments/frame"] = segments / frames;
     state.counters["paths"] = double(w.store().pathCount());
-    state.counters["store MiB"] =
+    state.counters["store_MiB"] =
         double(w.store().segments.size() * PhotonSegments::kBytesPerSegment) / (1 << 20);
-    state.counters["grid MiB"] =
+    state.counters["grid_MiB"] =
         double(w.registry.ctx().get<PhotonPathGrid>().memoryBytes()) / (1 << 20);
 }
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
-    PhotonWorld& w = world(name, fullRecompute);
+    PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
-           detp = 0, detpDelta = 0, detpMobile = 0;
+           detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
@@ -222,16 +230,20 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
         grid += stats.gridMs;
         detpDelta += w.irradiance->lastFrame().deltaMs;
         detpMobile += w.irradiance->lastFrame().mobileMs;
+        mobilePaths += double(w.irradiance->lastFrame().candidatePaths);
+        mobileSegments += double(w.irradiance->lastFrame().candidateSegments);
     }
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
     state.counters["landed/frame"] = landed / frames;
-    state.counters["find ms"] = find / frames;
-    state.counters["trace ms"] = trace / frames;
-    state.counters["grid ms"] = grid / frames;
-    state.counters["detp ms"] = detp / frames;
-    state.counters["detp delta ms"] = detpDelta / frames;
-    state.counters["detp mobiles ms"] = detpMobile / frames;
+    state.counters["find_ms"] = find / frames;
+    state.counters["trace_ms"] = trace / frames;
+    state.counters["grid_ms"] = grid / frames;
+    state.counters["detp_ms"] = detp / frames;
+    state.counters["detp_delta_ms"] = detpDelta / frames;
+    state.counters["detp_mobiles_ms"] = detpMobile / frames;
+    state.counters["detp_mobile_paths"] = mobilePaths / frames;
+    state.counters["detp_mobile_segments"] = mobileSegments / frames;
 }
 
 } // namespace
@@ -252,10 +264,17 @@ int main(int argc, char** argv) {
         RegisterBenchmark(id("RawRandomRays").c_str(), BM_RawRandomRays, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
+        // Argument: the path grid's resolution (0: the default); MobileUpdate/<scene>/<r>
+        // sweeps it (memory against candidates and time).
         RegisterBenchmark(id("MobileUpdate").c_str(), BM_MobileUpdate, scene, false)
+            ->Arg(0)
+            ->Arg(16)
+            ->Arg(24)
+            ->Arg(48)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark(id("FullReshoot").c_str(), BM_MobileUpdate, scene, true)
+            ->Arg(0)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
     }

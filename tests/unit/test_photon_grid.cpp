@@ -111,6 +111,26 @@ TEST(PhotonPathGrid, QueriesAreSupersetsOfBruteForceAndNoWiderThanACell) {
     expectQueries(w, 11, true);
 }
 
+TEST(PhotonPathGrid, ABoxPokingThroughTheFloorIsNotHandedThePathsThatLeaveThroughTheTop) {
+    // The room is open at the top only: many paths escape upwards, none reaches below the
+    // floor. A box around a crate resting on the floor pokes below the grid's bottom face;
+    // it must get the paths near it, not every escaping one.
+    GridWorld w;
+    const PhotonPathGrid& grid = w.grid();
+    const Aabb& bounds = grid.bounds();
+    const Aabb box{{-0.3f, bounds.min.y - 0.2f, -0.3f}, {0.3f, bounds.min.y + 0.3f, 0.3f}};
+    std::vector<std::uint32_t> found;
+    grid.pathsOverlapping(box, found);
+    const std::vector<std::uint32_t> exact = bruteForce(w.store(), box);
+    ASSERT_TRUE(isSubset(exact, found));
+    const float cell = grid.cellSize() * 1.001f;
+    EXPECT_TRUE(isSubset(found, bruteForce(w.store(), {box.min - cell, box.max + cell})));
+    const Aabb sky{{bounds.min.x, bounds.max.y, bounds.min.z},
+                   {bounds.max.x, bounds.max.y + 10.f, bounds.max.z}};
+    EXPECT_GT(bruteForce(w.store(), sky).size(), 5 * found.size()); // many escape upwards
+    EXPECT_FALSE(exact.empty());
+}
+
 TEST(PhotonPathGrid, ChangedPathsAreFoundUntilTheirChunkIsReindexed) {
     GridWorld w(1); // one chunk re-indexed per frame
     std::mt19937 rng(5);
