@@ -13,6 +13,11 @@ struct Material {
     float metallic = 0.f;          ///< 0 dielectric .. 1 metal (glossy / mirror surfaces)
     float roughness = 1.f;         ///< perceptual roughness; 0 is a mirror
     std::int32_t baseColorTexture = -1; ///< index into the TextureLibrary resource, -1: none
+    /// Modified Phong specular reflectance k_s, linear RGB (the VLF's glossy and mirror part);
+    /// zero for a purely diffuse surface. baseColor + specular should not exceed 1 per channel.
+    glm::vec3 specular{0.f};
+    /// Modified Phong exponent n_s of the specular lobe; 0 means an ideal mirror.
+    float phongExponent = 0.f;
 };
 
 } // namespace qgi

@@ -1,7 +1,9 @@
 #include "demo/DemoApp.h"
 
 #include "components/Camera.h"
+#include "components/Material.h"
 #include "components/PathFollower.h"
+#include "components/StaticMesh.h"
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
@@ -12,6 +14,8 @@
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneLoader.h"
 #include "systems/frame/FrameSchedule.h"
+#include "systems/vlf/VlfScene.h"
+#include "systems/sh_probes/AvatarShExport.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -37,6 +41,28 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
 
 void ensureParentDirectory(const std::filesystem::path& base) {
     if (base.has_parent_path()) std::filesystem::create_directories(base.parent_path());
+}
+
+/// `--vlf auto`: on when the static scene has glossy or mirror faces, but not more than 256 of
+/// them. The VLF stores light per planar face, so a curved glossy mesh (every triangle its own
+/// face, tiles in every direction) makes a large, slow field: that needs `--vlf on`.
+bool wantVlf(const Registry& registry) {
+    bool any = false;
+    registry.view<const StaticMesh, const Material>().each(
+        [&](const StaticMesh&, const Material& m) {
+            any |= vlf::VlfScene::fromComponent(m).specular != glm::vec3(0.f);
+        });
+    if (!any) return false;
+    const auto scene = vlf::VlfScene::fromRegistry(registry);
+    std::size_t specular = 0;
+    for (const vlf::Face& f : scene->faces())
+        specular += f.isSpecular();
+    if (specular > 256) {
+        logInfo("VLF off: ", specular, " glossy or mirror faces (curved glossy meshes); ",
+                "--vlf on bakes them anyway");
+        return false;
+    }
+    return true;
 }
 
 } // namespace
@@ -78,6 +104,19 @@ int runDemo(const DemoOptions& options) {
     } else {
         frameSettings.photons.reset();
     }
+    if (options.vlf == "on" || (options.vlf == "auto" && wantVlf(world))) {
+        VlfSystemSettings vlf;
+        vlf.bake.directionLevel = options.vlfLevel;
+        vlf.bake.linesPerSide = options.vlfLines;
+        vlf.bake.seed = options.seed;
+        if (options.vlfCache == "auto")
+            vlf.cacheFile = world.ctx().get<SceneInfo>().name + ".vlf";
+        else if (options.vlfCache != "none")
+            vlf.cacheFile = options.vlfCache;
+        frameSettings.vlf = vlf;
+    }
+    frameSettings.probes->hybrid = options.mode == "hybrid";
+    frameSettings.probes->seed = options.seed;
     if (options.pointCache || !options.pointCacheFile.empty() || options.showPoints) {
         frameSettings.pointCache = PointCacheSettings{};
         frameSettings.pointCache->seed = options.seed;
@@ -142,6 +181,11 @@ int runDemo(const DemoOptions& options) {
         ensureParentDirectory(*options.exportIrradiance);
         exportVertexIrradiance(world, *options.exportIrradiance);
         logInfo("wrote ", *options.exportIrradiance);
+    }
+    if (options.exportAvatars) {
+        ensureParentDirectory(*options.exportAvatars);
+        exportAvatarSh(world, *options.exportAvatars);
+        logInfo("wrote ", *options.exportAvatars);
     }
     if (options.profile) {
         ensureParentDirectory(*options.profile);

@@ -73,6 +73,20 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--export-irradiance", o.exportIrradiance,
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
                    "er eg eb (W/m^2) and a mobile flag per vertex");
+    app.add_option("--vlf", o.vlf,
+                   "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
+                   "the static scene has 1 to 256 glossy or mirror faces)")
+        ->check(CLI::IsMember({"on", "off", "auto"}));
+    app.add_option("--vlf-level", o.vlfLevel, "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
+        ->check(CLI::Range(1, 6));
+    app.add_option("--vlf-lines", o.vlfLines, "VLF lines per subfield side (a multiple of 8)")
+        ->check(CLI::Range(8, 1024));
+    app.add_option("--vlf-cache", o.vlfCache,
+                   "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)");
+    app.add_option("--export-avatars", o.exportAvatars,
+                   "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
+                   "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
+                   "real basis over world x, y, z)");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
     app.add_flag("--point-cache", o.pointCache,
                  "Build the point cache (soft shadows of area lights and indirect light per "

@@ -27,6 +27,11 @@ struct DemoOptions {
     std::optional<std::string> profile;    ///< base path: writes .json (trace) and .csv
     std::optional<std::string> exportScene; ///< .gltf or .glb path, written after loading
     std::optional<std::string> exportIrradiance; ///< .ply path, written after the last frame
+    std::string vlf = "auto"; ///< "on", "off", or "auto" (on with 1..256 glossy or mirror faces)
+    int vlfLevel = 4;              ///< VLF directions: 2 * 4^level + 1 (4: 513)
+    int vlfLines = 64;             ///< VLF lines per subfield side
+    std::string vlfCache = "auto"; ///< VLF cache file; "auto": <scene>.vlf in the working folder, "none": no file
+    std::optional<std::string> exportAvatars;    ///< .csv path: avatars' SH after the last frame
     bool quiet = false;
     bool pointCache = false;       ///< build (or load) the point cache; shade PointCacheShaded
     std::string pointCacheFile;    ///< its cache file; empty: build every start

@@ -3,9 +3,11 @@
 //   albedo / pi * (E_indirect + E_direct) + emission
 // E_indirect is the per-vertex irradiance (photon mode: all light) or the avatar's SH;
 // E_direct, in hybrid mode only (HYBRID defined), comes from the lights with shadow maps.
+// Glossy and mirror static surfaces add their specular radiance from the VLF (vlf.glsl).
 
 #include "common/lighting.glsl"
 #include "common/sh.glsl"
+#include "common/vlf.glsl"
 #include "common/pointcache.glsl"
 
 layout(location = UNIFORM_ALBEDO) uniform vec3 uAlbedo;
@@ -49,6 +51,8 @@ void main() {
 #endif
 
     oRadiance = vec4(albedo * (1.0 / PI) * irradiance + uEmission, 1.0);
+    // Glossy and mirror static surfaces: their specular part from the baked VLF.
+    oRadiance.rgb += vlfRadiance(vIn.worldPosition, n, normalize(uCameraPosition - vIn.worldPosition));
     // Point-set view: a dot of a fifth of the spacing radius on every cache point.
     if (uPointParams.w > 0.5 && nearest < 0.2) oRadiance = vec4(4.0, 0.5, 0.1, 1.0);
 }

@@ -4,10 +4,12 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
 #include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
 
 #include <array>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 namespace qgi {
 
@@ -48,6 +50,23 @@ struct DrawItem {
     /// and redraw only these over it.
     bool movable = false;
     std::array<glm::vec3, 9> sh{}; ///< radiance SH (ShLighting order) for SphericalHarmonics
+    /// Glossy / mirror static surface: its faces in VlfGpuTables (first, count; count 0: none).
+    std::int32_t vlfFirstFace = 0, vlfFaceCount = 0;
+};
+
+/// A baked Virtual Light Field in the layout shaders/common/vlf.glsl reads (filled by the VLF's
+/// owner, uploaded once by SceneRenderer; `version` changes when the contents do).
+struct VlfGpuTables {
+    std::uint64_t version = 0;
+    int level = 0, linesPerSide = 0, tileSize = 0, directionCount = 0;
+    glm::vec3 center{0.f};
+    float radius = 1.f;
+    std::vector<glm::vec4> directions;  ///< xyz: stored direction
+    std::vector<glm::ivec4> triangles;  ///< per leaf: corner index * 2 + (1 if reversed)
+    std::vector<glm::vec4> faces;       ///< per specular face: (normal, offset), (k_s, mirror)
+    std::vector<glm::ivec4> blocks;     ///< per (face, direction): two ivec4, see vlf.glsl
+    std::vector<std::int32_t> slots;    ///< tile id or -1
+    std::vector<glm::vec4> cells;       ///< per tile cell (tile-major, m x m row-major)
 };
 
 enum class LightType : std::uint8_t { Point, Spot, Directional };
@@ -75,6 +94,7 @@ struct RenderScene {
     RenderCamera camera;
     std::span<const DrawItem> items;
     std::span<const RenderLight> lights;
+    const VlfGpuTables* vlf = nullptr; ///< null: no VLF (items' vlfFaceCount must be 0)
     /// Since the previous frame a caster that is not movable moved, appeared or disappeared:
     /// every shadow map is redrawn (as when the lights change).
     bool staticCastersChanged = true;

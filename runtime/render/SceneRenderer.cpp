@@ -12,6 +12,7 @@
 #include <glm/gtc/matrix_inverse.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -201,6 +202,20 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
     glProgramUniform3fv(program, kCameraPosition, 1, glm::value_ptr(scene.camera.position));
     glBindBufferBase(GL_UNIFORM_BUFFER, kLightBlockBinding, mLightBlock.id());
     mShadows.bindTexture(kShadowUnit);
+    if (scene.vlf) {
+        if (scene.vlf->version != mVlfVersion) uploadVlf(*scene.vlf);
+        const GLuint bindings[5] = {kVlfDirectionsBinding, kVlfTrianglesBinding, kVlfFacesBinding,
+                                    kVlfBlocksBinding, kVlfSlotsBinding};
+        for (int k = 0; k < 5; ++k)
+            glBindBufferBase(GL_SHADER_STORAGE_BUFFER, bindings[k], mVlfBuffers[k].id());
+        glBindTextureUnit(kVlfAtlasUnit, mVlfAtlas.id());
+        glProgramUniform4i(program, kVlfParams, scene.vlf->level, scene.vlf->linesPerSide,
+                           scene.vlf->tileSize, scene.vlf->directionCount);
+        glProgramUniform4f(program, kVlfFrame, scene.vlf->center.x, scene.vlf->center.y,
+                           scene.vlf->center.z, scene.vlf->radius);
+    } else {
+        glBindTextureUnit(kVlfAtlasUnit, mWhite.id());
+    }
     const PointCacheView* cache = scene.pointCache && scene.pointCache->points ? scene.pointCache
                                                                               : nullptr;
     const GLuint none = mNoPointCache.id();
@@ -226,6 +241,7 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
         glProgramUniform3fv(program, kAlbedo, 1, glm::value_ptr(item.albedo));
         glProgramUniform3fv(program, kEmission, 1, glm::value_ptr(item.emission));
         glProgramUniform1i(program, kLighting, int(item.lighting));
+        glProgramUniform2i(program, kVlfFaces, item.vlfFirstFace, scene.vlf ? item.vlfFaceCount : 0);
         glProgramUniform1i(program, kMirrored, glm::determinant(linear) < 0.f);
         if (item.lighting == SurfaceLighting::SphericalHarmonics)
             glProgramUniform3fv(program, kSh, 9, glm::value_ptr(item.sh[0]));
@@ -233,6 +249,47 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
                           item.baseColorTexture ? item.baseColorTexture : mWhite.id());
         drawGpuMesh(*item.mesh);
     }
+}
+
+void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
+    const auto upload = [](GlBuffer& buffer, const void* data, std::size_t bytes) {
+        buffer = createBuffer();
+        // An empty table still needs a buffer to bind: one zero word.
+        const std::uint32_t zero = 0;
+        glNamedBufferStorage(buffer.id(), GLsizeiptr(bytes ? bytes : sizeof(zero)),
+                             bytes ? data : &zero, 0);
+    };
+    upload(mVlfBuffers[0], vlf.directions.data(), vlf.directions.size() * sizeof(glm::vec4));
+    upload(mVlfBuffers[1], vlf.triangles.data(), vlf.triangles.size() * sizeof(glm::ivec4));
+    upload(mVlfBuffers[2], vlf.faces.data(), vlf.faces.size() * sizeof(glm::vec4));
+    upload(mVlfBuffers[3], vlf.blocks.data(), vlf.blocks.size() * sizeof(glm::ivec4));
+    upload(mVlfBuffers[4], vlf.slots.data(), vlf.slots.size() * sizeof(std::int32_t));
+    // Tile atlas: kVlfAtlasTiles tiles of m x m cells per row.
+    const int m = std::max(vlf.tileSize, 1);
+    const std::size_t tiles = vlf.cells.size() / std::size_t(m * m);
+    const int width = kVlfAtlasTiles * m;
+    const int rows = int(std::max<std::size_t>(1, (tiles + kVlfAtlasTiles - 1) / kVlfAtlasTiles));
+    GLint maxSize = 0;
+    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
+    if (rows * m > maxSize)
+        fail("VLF tile atlas of ", width, "x", rows * m, " texels exceeds the GL limit ", maxSize,
+             " (fewer directions or lines)");
+    std::vector<glm::vec4> texels(std::size_t(width) * std::size_t(rows * m), glm::vec4(0.f));
+    for (std::size_t t = 0; t < tiles; ++t) {
+        const std::size_t x0 = (t % kVlfAtlasTiles) * std::size_t(m);
+        const std::size_t y0 = (t / kVlfAtlasTiles) * std::size_t(m);
+        for (int v = 0; v < m; ++v)
+            for (int u = 0; u < m; ++u)
+                texels[(y0 + std::size_t(v)) * std::size_t(width) + x0 + std::size_t(u)] =
+                    vlf.cells[t * std::size_t(m * m) + std::size_t(v * m + u)];
+    }
+    mVlfAtlas = createTexture(GL_TEXTURE_2D);
+    glTextureStorage2D(mVlfAtlas.id(), 1, GL_RGBA32F, width, rows * m);
+    glTextureSubImage2D(mVlfAtlas.id(), 0, 0, 0, width, rows * m, GL_RGBA, GL_FLOAT, texels.data());
+    glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    mVlfVersion = vlf.version;
+    logInfo("VLF uploaded: ", tiles, " tiles in a ", width, "x", rows * m, " atlas");
 }
 
 void SceneRenderer::tonemapAndPresent() {

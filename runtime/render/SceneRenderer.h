@@ -39,6 +39,7 @@ public:
 private:
     void uploadLights(std::span<const RenderLight> lights);
     void drawScene(const RenderScene& scene);
+    void uploadVlf(const VlfGpuTables& vlf);
     void tonemapAndPresent();
 
     RenderSettings mSettings;
@@ -57,6 +58,9 @@ private:
     GlBuffer mNoPointCache;    ///< 16 zero bytes on the point-cache bindings when there is none
     GlVertexArray mNoVertices; ///< the fullscreen triangle needs a vertex array, not data
     bool mWarnedLightLimit = false;
+    std::uint64_t mVlfVersion = 0;  ///< of the uploaded tables; 0: none
+    GlBuffer mVlfBuffers[5];        ///< directions, triangles, faces, blocks, slots
+    GlTexture mVlfAtlas;
 };
 
 } // namespace qgi

@@ -26,6 +26,16 @@ std::string shaderInterfaceDefines() {
     define("UNIFORM_SH", kSh);
     define("UNIFORM_CAMERA_POSITION", kCameraPosition);
     define("UNIFORM_EXPOSURE", kExposure);
+    define("UNIFORM_VLF_FACES", kVlfFaces);
+    define("UNIFORM_VLF_PARAMS", kVlfParams);
+    define("UNIFORM_VLF_FRAME", kVlfFrame);
+    define("VLF_ATLAS_UNIT", kVlfAtlasUnit);
+    define("VLF_DIRECTIONS_BINDING", kVlfDirectionsBinding);
+    define("VLF_TRIANGLES_BINDING", kVlfTrianglesBinding);
+    define("VLF_FACES_BINDING", kVlfFacesBinding);
+    define("VLF_BLOCKS_BINDING", kVlfBlocksBinding);
+    define("VLF_SLOTS_BINDING", kVlfSlotsBinding);
+    define("VLF_ATLAS_TILES", kVlfAtlasTiles);
     define("UNIFORM_POINT_CACHE_GRID", kPointCacheGrid);
     define("UNIFORM_POINT_CACHE_DIMS", kPointCacheDims);
     define("UNIFORM_POINT_CACHE_PARAMS", kPointCacheParams);

@@ -19,18 +19,30 @@ constexpr int kMirrored = 15;
 constexpr int kSh = 16; // vec3[9]
 constexpr int kCameraPosition = 25;
 constexpr int kExposure = 26;
-constexpr int kPointCacheGrid = 27;   // vec4: grid origin, cell size (shaders/common/pointcache.glsl)
-constexpr int kPointCacheDims = 28;   // ivec4: cells per axis, falloff exponent
-constexpr int kPointCacheParams = 29; // vec4: min normal cosine, plane tolerance, enabled, show
+constexpr int kVlfFaces = 27;  // ivec2: first specular face, count
+constexpr int kVlfParams = 28; // ivec4: level, lines per side, tile size, directions
+constexpr int kVlfFrame = 29;  // vec4: VLF centre, radius
+constexpr int kPointCacheGrid = 30;   // vec4: grid origin, cell size (shaders/common/pointcache.glsl)
+constexpr int kPointCacheDims = 31;   // ivec4: cells per axis, falloff exponent
+constexpr int kPointCacheParams = 32; // vec4: min normal cosine, plane tolerance, enabled, show
 
 // Texture units and buffer binding points.
 constexpr int kBaseColorUnit = 0;
 constexpr int kHdrUnit = 0;
 constexpr int kShadowUnit = 1;
 constexpr int kLightBlockBinding = 0;
-constexpr int kPointCachePointsBinding = 1; // shader storage buffers of the point cache
-constexpr int kPointCacheCellStartBinding = 2;
-constexpr int kPointCacheCellPointsBinding = 3;
+constexpr int kVlfAtlasUnit = 2;
+constexpr int kVlfDirectionsBinding = 1; // shader storage blocks
+constexpr int kVlfTrianglesBinding = 2;
+constexpr int kVlfFacesBinding = 3;
+constexpr int kVlfBlocksBinding = 4;
+constexpr int kVlfSlotsBinding = 5;
+constexpr int kVlfAtlasTiles = 256; // tiles per atlas row
+// The point cache's shader storage blocks: 8 blocks in all with the VLF's, the fragment-stage
+// minimum GL 4.3 guarantees, and binding points within the guaranteed 0..7.
+constexpr int kPointCachePointsBinding = 6;
+constexpr int kPointCacheCellStartBinding = 7;
+constexpr int kPointCacheCellPointsBinding = 0;
 
 // Array sizes: lights in the light block; shadow layers (a point light takes 6, a spot or
 // directional light 1).

@@ -3,6 +3,7 @@
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PathFollower.h"
 #include "components/LightStandIn.h"
 #include "runtime/scene/SceneInfo.h"
@@ -178,6 +179,26 @@ void buildCornellBox(BuiltinSceneBuilder& builder) {
     builder.finish(glm::vec3(0.f)); // nothing outside: the open front looks into the dark
     // 15 W in a box half a metre wide: walls reach a few hundred W/m^2.
     registry.ctx().get<SceneInfo>().exposure = 0.3f;
+}
+
+void buildCornellBoxGlossy(BuiltinSceneBuilder& builder) {
+    buildCornellBox(builder);
+    Registry& registry = builder.registry();
+    registry.view<const Name, Material>().each([](Entity, const Name& name, Material& m) {
+        if (name.value == "floor") {
+            m.baseColor *= 0.4f;
+            m.specular = glm::vec3(0.5f);
+            m.phongExponent = 40.f;
+            m.metallic = 0.5f;
+            m.roughness = 0.467f; // (2 / (n_s + 2))^(1/4): the matching glTF roughness
+        } else if (name.value == "tall block") {
+            m.baseColor = glm::vec3(0.05f);
+            m.specular = glm::vec3(0.85f);
+            m.phongExponent = 0.f;
+            m.metallic = 0.85f;
+            m.roughness = 0.f;
+        }
+    });
 }
 
 } // namespace qgi

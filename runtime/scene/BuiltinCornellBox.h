@@ -16,4 +16,10 @@ inline constexpr float kCornellBoxMaxEdgeLength = 0.02f;
 /// in the free floor space in front of the tall block.
 void buildCornellBox(BuiltinSceneBuilder& builder);
 
+/// The Cornell box with a glossy floor and a mirror tall block (the specular Cornell box of
+/// seed 002, Figs 6.5 and 6.10), for the VLF: the floor keeps 0.4 of its diffuse albedo and
+/// gets a modified Phong lobe k_s = 0.5, n_s = 40; the tall block becomes a mirror with
+/// k_s = 0.85 and a faint diffuse part (albedo 0.05).
+void buildCornellBoxGlossy(BuiltinSceneBuilder& builder);
+
 } // namespace qgi

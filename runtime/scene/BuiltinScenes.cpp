@@ -17,8 +17,9 @@ struct BuiltinScene {
     void (*build)(BuiltinSceneBuilder&);
 };
 
-constexpr std::array<BuiltinScene, 2> kScenes{{
+constexpr std::array<BuiltinScene, 3> kScenes{{
     {"cornell", kCornellBoxMaxEdgeLength, buildCornellBox},
+    {"cornell-glossy", kCornellBoxMaxEdgeLength, buildCornellBoxGlossy},
     {"atrium", kAtriumMaxEdgeLength, buildAtrium},
 }};
 
@@ -43,7 +44,7 @@ bool isBuiltinScene(std::string_view name) {
 
 void buildBuiltinScene(Registry& registry, std::string_view name, const SceneOptions& options) {
     const BuiltinScene* scene = findScene(name);
-    if (!scene) fail("unknown built-in scene '", name, "' (built-in scenes: cornell, atrium)");
+    if (!scene) fail("unknown built-in scene '", name, "' (built-in scenes: cornell, cornell-glossy, atrium)");
     if (!std::isfinite(options.maxEdgeLength) || options.maxEdgeLength < 0.f)
         fail("scene option maxEdgeLength ", options.maxEdgeLength,
              " must be a finite length in metres, or 0 for the scene's default");

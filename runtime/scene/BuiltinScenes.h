@@ -13,7 +13,7 @@ struct SceneOptions {
     float maxEdgeLength = 0.f;
 };
 
-/// Names of the scenes built in code: "cornell", "atrium".
+/// Names of the scenes built in code: "cornell", "cornell-glossy", "atrium".
 std::vector<std::string> builtinSceneNames();
 bool isBuiltinScene(std::string_view name);
 

@@ -8,4 +8,11 @@ namespace qgi {
 /// Camera; null when there is none. Every consumer (renderer, demo input) uses this one rule.
 Entity findActiveCamera(const Registry& registry);
 
+/// Whether a point or spot light tagged LightStandIn sits at the place of the mesh `surface`:
+/// within the bounds of its world-space vertices, widened by a quarter of their diagonal (at
+/// least 5 cm). Hybrid mode's renderer then draws that lamp's direct light through the
+/// stand-in, so nothing else may count it again (photons leaving the surface, probes seeing
+/// its emission). False when `surface` has no Mesh or WorldTransform.
+bool hasLightStandIn(const Registry& registry, Entity surface);
+
 } // namespace qgi

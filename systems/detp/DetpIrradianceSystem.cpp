@@ -114,7 +114,7 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     if (!store || !delta) return;
     mSkipsDirect.assign(store->lights.size(), 0);
     for (std::size_t l = 0; l < store->lights.size(); ++l)
-        mSkipsDirect[l] = mSettings.hybrid && store->lights[l].punctual;
+        mSkipsDirect[l] = mSettings.hybrid && store->lights[l].directDrawn;
     collectMovedMobiles(registry, *delta);
     const bool full = delta->full || mNeedsFull;
     mNeedsFull = false;
@@ -161,7 +161,7 @@ void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const P
 
 bool DetpIrradianceSystem::counted(const PhotonSegments& segments, std::size_t s,
                                    std::uint16_t light) const {
-    // A path naming a light the store does not list is treated as a punctual light's.
+    // A path naming a light the store does not list is treated as one the renderer draws.
     return segments.bounce[s] != 0 || !mSettings.hybrid ||
            (light < mSkipsDirect.size() && !mSkipsDirect[light]);
 }
@@ -267,7 +267,8 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
     for (std::size_t i = 0; i < delta.paths.size(); ++i) {
         std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
         const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
-        // Not counted (hybrid mode, a punctual light's first segment): skipped on both sides.
+        // Not counted (hybrid mode, first segment of a light the renderer draws): skipped on
+        // both sides.
         const std::uint16_t light = store.paths[delta.paths[i]].light;
         if (o < oldEnd && !counted(before, o, light)) ++o;
         if (n < newEnd && !counted(after, n, light)) ++n;

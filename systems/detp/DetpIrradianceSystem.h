@@ -56,10 +56,11 @@ struct PhotonSegments;
  *     depends on the whole set), so any change to the ray set rebuilds the tree from every
  *     stored hit and re-estimates every vertex; a mobile that moved without changing the
  *     ray set is re-estimated alone. That full cost every frame is the point of comparing.
- *  Hybrid mode skips the segments that leave a punctual light (bounce 0 of a path whose
- *  PhotonLight::punctual is set) in all three: the renderer draws that light with its shadow
- *  maps. The first segments of emissive surfaces' photons still count, so an area light's
- *  direct light (which the renderer cannot draw) comes from photons in both modes.
+ *  Hybrid mode skips the segments that leave a light the renderer draws (bounce 0 of a path
+ *  whose PhotonLight::directDrawn is set: punctual lights, and emissive surfaces with a
+ *  LightStandIn) in all three. Other emissive surfaces' first segments still count, so an
+ *  area light's direct light (which the renderer cannot draw) comes from photons in both
+ *  modes.
  *
  *  Reads:  ctx<const PhotonStore>, ctx<const PhotonDelta>, ctx<const PhotonPathGrid> (when
  *          present), const WorldTransform (and its change list), const MobileMesh;
@@ -110,7 +111,7 @@ private:
                     bool full);
     void splitDelta(const PhotonStore& store, const PhotonDelta& delta);
     /// Whether segment s of a path from `light` counts: not in hybrid mode when it is a
-    /// punctual light's first segment (the renderer draws that light).
+    /// first segment of a light the renderer draws (PhotonLight::directDrawn).
     bool counted(const PhotonSegments& segments, std::size_t s, std::uint16_t light) const;
     /// Every live segment of the store that counts, path by path (re-traced paths leave
     /// garbage behind in the segment array).

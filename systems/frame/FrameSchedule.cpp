@@ -2,6 +2,7 @@
 
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
 
 namespace qgi {
 
@@ -19,6 +20,18 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.irradiance");
         mIrradiance->build(registry);
     }
+    if (settings.vlf) {
+        mVlf = std::make_unique<VlfSystem>(*settings.vlf);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.vlf");
+        mVlf->build(registry);
+    }
+    // A scene without meshes has no bounds to lay probes over (and nothing to light them).
+    const SceneInfo* info = registry.ctx().find<SceneInfo>();
+    if (settings.probes && info && !info->bounds.empty()) {
+        mProbes = std::make_unique<ShProbeSystem>(*settings.probes);
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.probes");
+        mProbes->build(registry);
+    }
     if (settings.pointCache) {
         mPointCache = std::make_unique<PointCacheSystem>(*settings.pointCache);
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.pointcache");
@@ -32,6 +45,7 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         .addPhase("raytrace.sync")
         .addPhase("photon.update")
         .addPhase("detp.irradiance")
+        .addPhase("sh.probes")
         .addPhase("point.cache")
         .addPhase("render");
 
@@ -48,6 +62,9 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
         mSchedule.add("detp.irradiance", "detp.irradiance",
                       [this](Registry& r, const FrameContext& f) { mIrradiance->update(r, f); });
     }
+    if (mProbes)
+        mSchedule.add("sh.probes", "sh.probes",
+                      [this](Registry& r, const FrameContext& f) { mProbes->update(r, f); });
     if (mPointCache)
         mSchedule.add("point.cache", "point.cache",
                       [this](Registry& r, const FrameContext& f) { mPointCache->update(r, f); });

@@ -7,7 +7,9 @@
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/point_cache/PointCacheSystem.h"
 #include "systems/render/RenderSystem.h"
+#include "systems/sh_probes/ShProbeSystem.h"
 #include "systems/transform/TransformSystem.h"
+#include "systems/vlf/VlfSystem.h"
 
 #include <memory>
 #include <optional>
@@ -18,11 +20,17 @@ struct FrameSettings {
     /// Photon transport and per-vertex irradiance; off: no global illumination (direct only).
     std::optional<PhotonSettings> photons = PhotonSettings{};
     DetpSettings irradiance;
+    /// SH probe volume lighting the avatars; off: avatars keep whatever ShLighting they have.
+    /// Set `hybrid` to match the render mode.
+    std::optional<ShProbeSettings> probes = ShProbeSettings{};
     /// The point cache (soft shadows of area lights and indirect light blended per fragment on
     /// surfaces tagged PointCacheShaded); off unless set. Built (or loaded) at construction.
     std::optional<PointCacheSettings> pointCache;
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
     std::optional<RenderSettings> render = RenderSettings{};
+    /// Virtual Light Field of the static scene for glossy and mirror surfaces: baked (or
+    /// loaded from its cache) at construction, looked up by the renderer; off by default.
+    std::optional<VlfSystemSettings> vlf;
 };
 
 /** The frame, in one place: owns the systems and lists them in the order they run.
@@ -33,11 +41,14 @@ struct FrameSettings {
  *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
  *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
  *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
+ *    (vlf: baked or loaded at construction; static, so no per-frame entry)
+ *    sh.probes         stale probes re-projected within a budget; every avatar's ShLighting
  *    point.cache       point cache: indirect from the photon delta, soft shadows around moved
  *                      mobiles within a per-frame budget
  *    render            uploads dirty ranges, draws, tonemaps
  *
- *  Construction creates the world resources the systems share (RayScene, FrameProfiler)
+ *  Construction creates the world resources the systems share (RayScene, FrameProfiler,
+ *  ProbeVolume when the scene has a SceneInfo)
  *  unless the registry already holds them. Systems never call each other.               */
 class FrameSchedule {
 public:
@@ -48,6 +59,7 @@ public:
     RenderSystem* renderer() { return mRender.get(); }
     PhotonUpdateSystem* photons() { return mPhotons.get(); }
     DetpIrradianceSystem* irradiance() { return mIrradiance.get(); }
+    ShProbeSystem* probes() { return mProbes.get(); }
     PointCacheSystem* pointCache() { return mPointCache.get(); }
 
 private:
@@ -56,8 +68,10 @@ private:
     TransformSystem mTransform;
     std::unique_ptr<PhotonUpdateSystem> mPhotons;
     std::unique_ptr<DetpIrradianceSystem> mIrradiance;
+    std::unique_ptr<ShProbeSystem> mProbes;
     std::unique_ptr<PointCacheSystem> mPointCache;
     std::unique_ptr<RenderSystem> mRender;
+    std::unique_ptr<VlfSystem> mVlf;
 };
 
 } // namespace qgi

@@ -3,14 +3,15 @@
 #include "components/DirectionalLight.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
-#include "components/MobileMesh.h"
 #include "components/LightStandIn.h"
+#include "components/MobileMesh.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/scene/SceneQueries.h"
 
 #include <glm/gtc/constants.hpp>
 #include <glm/matrix.hpp>
@@ -110,6 +111,8 @@ void prepareSurface(const Registry& registry, PhotonEmitter& emitter) {
         emitter.triangleCdf.push_back(float(area));
     }
     if (emitter.triangles.empty()) return disable(emitter, "Mesh", "has no triangle with area");
+    // A stand-in at the surface's place: hybrid mode's renderer draws the lamp's direct light.
+    emitter.directDrawn = hasLightStandIn(registry, emitter.entity);
     for (float& c : emitter.triangleCdf)
         c = float(double(c) / area);
     emitter.triangleCdf.back() = 1.f;
@@ -168,6 +171,7 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
                        emitter.kind == EmitterKind::Surface ? "emission" : "colour x intensity",
                        "is negative or not finite");
     emitter.position = glm::vec3(emitter.world[3]);
+    emitter.directDrawn = emitter.kind != EmitterKind::Surface; // prepareSurface decides
     switch (emitter.kind) {
     case EmitterKind::Point:
         emitter.power = 4.f * glm::pi<float>() * emitter.radiant;

@@ -62,6 +62,10 @@ struct PhotonEmitter {
     glm::vec3 footprintV{0.f};
     std::vector<Triangle> triangles; ///< surface: triangles with non-zero area
     std::vector<float> triangleCdf;  ///< surface: cumulative area fraction, last entry 1
+    /// Hybrid mode's renderer draws this light's direct light: always for point, spot and
+    /// directional lights; for a surface, when it has a LightStandIn (hasLightStandIn) as
+    /// prepared.
+    bool directDrawn = false;
 
     // ---- photons (the system's allocation) ---------------------------------------------------
     std::uint32_t firstPhoton = 0; ///< this light's photons are [first, first + count)

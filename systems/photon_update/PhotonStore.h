@@ -53,9 +53,10 @@ struct PhotonLight {
     Entity entity;
     glm::vec3 power{0.f}; ///< W emitted, linear RGB
     std::uint32_t photonCount = 0;
-    /// A point, spot or directional light: the renderer draws its direct light in hybrid mode,
-    /// so its photons' first segments are not counted there. An emissive surface's are.
-    bool punctual = false;
+    /// The renderer draws this light's direct light in hybrid mode, so its photons' first
+    /// segments are not counted there: a point, spot or directional light, or an emissive
+    /// surface with a LightStandIn at its place (see PhotonEmitter::directDrawn).
+    bool directDrawn = false;
 };
 
 /** World resource: the stored photon ray set (seed 000 section 2.2).

@@ -299,7 +299,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
         store.lights.push_back(
-            {e.entity, e.power, e.photonCount, e.kind != EmitterKind::Surface});
+            {e.entity, e.power, e.photonCount, e.directDrawn});
         store.emittedPower += e.power;
         store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
     }

@@ -22,6 +22,7 @@
 #include "runtime/scene/TextureLibrary.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/render/GpuResources.h"
+#include "systems/vlf/VlfField.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 
@@ -65,6 +66,7 @@ void RenderSystem::update(Registry& registry, const FrameContext& frame) {
     if (!gpu) gpu = &registry.ctx().emplace<GpuResources>();
 
     RenderScene scene;
+    scene.vlf = vlfTables(registry);
     if (syncPointCache(registry)) scene.pointCache = &mPointCacheView;
     syncMeshes(registry, *gpu, scene);
     collectLights(registry);
@@ -130,6 +132,14 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
         item.baseColorTexture = baseColorTexture(registry, gpu, m.baseColorTexture);
         if (irradiance && !irradiance->dirty.empty())
             uploadIrradiance(gpuMesh, irradiance->irradiance, irradiance->dirty);
+        if (scene.vlf) {
+            const VlfField& field = registry.ctx().get<VlfField>();
+            if (const auto it = field.specularFaces.find(e); it != field.specularFaces.end()) {
+                // An entity's faces are consecutive among the specular faces.
+                item.vlfFirstFace = field.vlf.specularIndex(it->second.front());
+                item.vlfFaceCount = std::int32_t(it->second.size());
+            }
+        }
         if (registry.has<Avatar>(e)) {
             item.lighting = SurfaceLighting::SphericalHarmonics;
             const ShLighting* sh = registry.tryGet<ShLighting>(e);
@@ -142,6 +152,42 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
     });
 }
 
+const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
+    const VlfField* field = registry.ctx().find<VlfField>();
+    if (!field) return nullptr;
+    if (field == mVlfSource && field->vlf.key() == mVlfKey) return &mVlf;
+    const vlf::Vlf& v = field->vlf;
+    const vlf::DirectionSet& dirs = v.directions();
+    VlfGpuTables t;
+    t.version = mVlf.version + 1;
+    t.level = dirs.level();
+    t.linesPerSide = v.linesPerSide();
+    t.tileSize = v.tileSize();
+    t.directionCount = int(dirs.size());
+    t.center = v.center();
+    t.radius = v.radius();
+    for (const glm::vec3& d : dirs.directions()) t.directions.emplace_back(d, 0.f);
+    for (std::uint32_t i = 0; i < dirs.triangleCount(); ++i) {
+        glm::ivec4 code(0);
+        for (int k = 0; k < 3; ++k)
+            code[k] = int(dirs.triangle(i)[k].index) * 2 + (dirs.triangle(i)[k].sign < 0.f ? 1 : 0);
+        t.triangles.push_back(code);
+    }
+    for (std::size_t sf = 0; sf < v.specularFaceCount(); ++sf) {
+        const vlf::Face& f = v.faces()[v.specularFace(sf)];
+        t.faces.emplace_back(f.normal, f.offset);
+        t.faces.emplace_back(f.specular, f.isMirror() ? 1.f : 0.f);
+    }
+    for (const vlf::TileBlock& b : v.blocks()) {
+        t.blocks.emplace_back(b.side, b.s0, b.t0, b.sw);
+        t.blocks.emplace_back(b.tw, std::int32_t(b.firstSlot), 0, 0);
+    }
+    t.slots = v.slots();
+    t.cells = v.tiles();
+    mVlf = std::move(t);
+    mVlfSource = field;
+    mVlfKey = v.key();
+    return &mVlf;
 bool RenderSystem::syncPointCache(const Registry& registry) {
     const PointCache* cache = registry.ctx().find<PointCache>();
     if (!cache || cache->size() == 0 || cache->grid.pointCount() != cache->size()) return false;

@@ -63,6 +63,8 @@ private:
     void sortFrontToBack(const glm::vec3& eye);
     GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
     void writeScreenshot(const std::filesystem::path& base) const;
+    /// The VlfField resource in the renderer's layout (rebuilt when the field is replaced).
+    const VlfGpuTables* vlfTables(const Registry& registry);
     bool syncPointCache(const Registry& registry);
 
     SceneRenderer mRenderer;
@@ -78,6 +80,9 @@ private:
     std::vector<glm::vec4> mCacheStaging;
     bool mWarnedNoCamera = false;
     bool mWarnedTexture = false;
+    VlfGpuTables mVlf;
+    const void* mVlfSource = nullptr; ///< the VlfField the tables were built from
+    std::uint64_t mVlfKey = 0;        ///< and its bake key
 };
 
 } // namespace qgi

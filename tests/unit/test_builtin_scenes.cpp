@@ -225,7 +225,7 @@ TEST_P(BuiltinScenes, BuildIsDeterministic) {
 INSTANTIATE_TEST_SUITE_P(All, BuiltinScenes, ::testing::Values("cornell", "atrium"));
 
 TEST(BuiltinSceneNames, ListsAndRejects) {
-    EXPECT_EQ(builtinSceneNames(), (std::vector<std::string>{"cornell", "atrium"}));
+    EXPECT_EQ(builtinSceneNames(), (std::vector<std::string>{"cornell", "cornell-glossy", "atrium"}));
     EXPECT_TRUE(isBuiltinScene("atrium"));
     EXPECT_FALSE(isBuiltinScene("Cornell"));
     EXPECT_FALSE(isBuiltinScene(""));

@@ -355,6 +355,38 @@ TEST(PhotonEmission, StandInLightsShootNoPhotons) {
     EXPECT_NEAR(store.emittedPower.x, 4.0 * kPi * 3.0, 1e-4);
 }
 
+TEST(PhotonEmission, AStandInMarksItsSurfaceAsDrawnByTheRendererInHybridMode) {
+    // Two emissive panels under a ceiling; a stand-in bulb 2 cm below the first only. Hybrid
+    // mode's renderer draws the first lamp (through the bulb), so its photons' first segments
+    // must not count; the second has nobody to draw it. Point lights are always drawn.
+    Registry registry;
+    test::addMesh(registry, test::boxMesh({3.f, 2.f, 3.f}, true, true), glm::mat4(1.f),
+                  test::grey(0.6f), false, "open room");
+    Material glow = test::grey(0.f);
+    glow.emission = glm::vec3(2.f);
+    const Entity lamp = test::addMesh(registry, test::gridMesh({-0.2f, 1.9f, -0.2f}, {0.4f, 0.f, 0.f},
+                                                               {0.f, 0.f, 0.4f}, 1),
+                                      glm::mat4(1.f), glow, false, "lamp");
+    const Entity panel = test::addMesh(registry, test::gridMesh({1.f, 1.9f, 1.f}, {0.4f, 0.f, 0.f},
+                                                                {0.f, 0.f, 0.4f}, 1),
+                                       glm::mat4(1.f), glow, false, "panel");
+    registry.emplace<LightStandIn>(test::addPointLight(registry, {0.f, 1.88f, 0.f}, 5.f));
+    const Entity bulb = test::addPointLight(registry, {-1.5f, 1.f, 0.f}, 3.f);
+    test::buildRayScene(registry);
+    PhotonSettings settings;
+    settings.photonCount = 1000;
+    PhotonUpdateSystem system(settings);
+    test::firstUpdate(registry, system);
+    const PhotonStore& store = registry.ctx().get<PhotonStore>();
+    ASSERT_EQ(store.lights.size(), 3u);
+    for (const PhotonLight& light : store.lights) {
+        if (light.entity == bulb) EXPECT_TRUE(light.directDrawn);
+        else if (light.entity == lamp) EXPECT_TRUE(light.directDrawn);
+        else if (light.entity == panel) EXPECT_FALSE(light.directDrawn);
+        else ADD_FAILURE() << "unexpected light";
+    }
+}
+
 TEST(PhotonEmission, PhotonCountsFollowPowerAndEveryPhotonCarriesItsShare) {
     Registry registry;
     test::addMesh(registry, test::boxMesh({3.f, 2.f, 3.f}, true, true), glm::mat4(1.f),

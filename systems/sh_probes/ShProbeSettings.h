@@ -1,0 +1,65 @@
+#pragma once
+
+#include <cstdint>
+
+namespace qgi {
+
+struct Aabb;
+
+/// How the SH probe volume (ShProbeSystem) is laid out, projected and kept up to date.
+/// `validate(const ShProbeSettings&)` (called by the system's constructor) rejects absurd values.
+struct ShProbeSettings {
+    /// Distance between neighbouring probes, metres, the same on every axis. 0: the scene
+    /// default, the longest side of the scene bounds / cellsAlongLongestAxis.
+    float spacing = 0.f;
+    /// Used when spacing is 0: cells along the longest side of the scene bounds.
+    std::uint32_t cellsAlongLongestAxis = 16;
+    /// Building a volume of more probes than this throws qgi::Error (a spacing far too fine).
+    std::uint32_t maxProbes = 1u << 20;
+    /// Rays per probe projection (a spherical Fibonacci set, turned by a seeded random rotation
+    /// per probe). The projection's noise falls as 1/sqrt of this.
+    std::uint32_t raysPerProbe = 256;
+    /// A probe whose rays hit back faces in more than this share is inside geometry: disabled,
+    /// it never contributes to an avatar.
+    float backFaceShare = 0.25f;
+    /// Stale probes re-projected per frame at most, nearest to an avatar first. The frame
+    /// profiler's "sh.probes" entry shows what this costs.
+    std::uint32_t updateBudget = 16;
+    /// Probes within this distance of a change (a delta segment's end point, the old or new
+    /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.
+    float influenceDistance = 0.f;
+    /// A half-spacing cell of the lattice needs at least this many end points of this frame's
+    /// PhotonDelta segments before it marks probes: the scattered later bounces of re-traced
+    /// paths change per-vertex irradiance by a photon or two here and there, far below the
+    /// estimate's own noise (DETP's default disc holds about 64 photons), and would otherwise
+    /// keep the whole volume stale while anything moves.
+    std::uint32_t minDeltaEndPoints = 4;
+    /// A moved mobile also marks the probes it can cover at least this share of (the sphere of
+    /// directions) by its bounding sphere of radius rho: those within rho / (2 sqrt(share)) of
+    /// its old or new bounds (at 0.01, five radii). A mobile in view of a farther probe changes
+    /// its projection by less than this share of the radiance difference it makes.
+    float mobileSolidAngleShare = 0.01f;
+    /// Visibility lattice points per cell edge: an avatar's weight for each corner probe is the
+    /// trilinear blend of whether the probe is visible from the lattice points around it.
+    /// Lattice spacing = spacing / this; keep it below the avatars' radius.
+    std::uint32_t visibilitySubdivisions = 4;
+    /// Hybrid mode (the renderer draws punctual lights' direct light on avatars and surfaces):
+    /// surfaces a probe sees add the punctual lights' direct light by a shadow ray per hit to one
+    /// light, picked in proportion to its unshadowed contribution (per-vertex
+    /// irradiance carries only the reflected part), and the probes carry no punctual light of
+    /// their own. Photon mode (false): per-vertex irradiance carries all light, and each probe
+    /// adds the direct light of the punctual lights that shoot photons (not LightStandIn),
+    /// shadowed, as directional sources, since the avatar shader adds none.
+    bool hybrid = false;
+    /// Seeds the per-probe rotations of the ray directions.
+    std::uint64_t seed = 1;
+};
+
+/// Throws qgi::Error naming the first field out of range.
+void validate(const ShProbeSettings& settings);
+
+/// The spacing in use for a scene of `bounds`: settings.spacing, or the default. Throws
+/// qgi::Error when the bounds are empty or not finite and no spacing is set.
+float resolveProbeSpacing(const ShProbeSettings& settings, const Aabb& bounds);
+
+} // namespace qgi

@@ -1,0 +1,357 @@
+#include "systems/vlf/Vlf.h"
+
+#include "runtime/core/Error.h"
+#include "systems/vlf/VlfHash.h"
+
+#include <glm/geometric.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace qgi::vlf {
+namespace {
+
+/// Separating-axis test of a 2D triangle against the box [lo, hi].
+bool overlaps(const std::array<glm::vec2, 3>& tri, const glm::vec2& lo, const glm::vec2& hi) {
+    glm::vec2 tmin = glm::min(tri[0], glm::min(tri[1], tri[2]));
+    glm::vec2 tmax = glm::max(tri[0], glm::max(tri[1], tri[2]));
+    if (tmax.x < lo.x || tmin.x > hi.x || tmax.y < lo.y || tmin.y > hi.y) return false;
+    const std::array<glm::vec2, 4> box{lo, {hi.x, lo.y}, hi, {lo.x, hi.y}};
+    for (int e = 0; e < 3; ++e) {
+        const glm::vec2 a = tri[e], b = tri[(e + 1) % 3];
+        const glm::vec2 axis(a.y - b.y, b.x - a.x);
+        float t0 = glm::dot(axis, a), t1 = glm::dot(axis, tri[(e + 2) % 3]);
+        const float triMin = std::min(t0, t1), triMax = std::max(t0, t1);
+        float bmin = glm::dot(axis, box[0]), bmax = bmin;
+        for (int k = 1; k < 4; ++k) {
+            const float p = glm::dot(axis, box[k]);
+            bmin = std::min(bmin, p);
+            bmax = std::max(bmax, p);
+        }
+        if (bmax < triMin || bmin > triMax) return false;
+    }
+    return true;
+}
+
+bool inside(const std::array<glm::vec2, 3>& t, const glm::vec2& p) {
+    const auto edge = [](const glm::vec2& a, const glm::vec2& b, const glm::vec2& q) {
+        return (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x);
+    };
+    const float e0 = edge(t[0], t[1], p), e1 = edge(t[1], t[2], p), e2 = edge(t[2], t[0], p);
+    return (e0 >= 0.f && e1 >= 0.f && e2 >= 0.f) || (e0 <= 0.f && e1 <= 0.f && e2 <= 0.f);
+}
+
+} // namespace
+
+std::uint64_t vlfKey(const VlfScene& scene, const VlfSettings& s) {
+    Hasher h;
+    h.add(scene.contentHash());
+    h.add(s.directionLevel);
+    h.add(s.linesPerSide);
+    h.add(s.tileSize);
+    h.add(s.iterations);
+    h.add(s.jitterSamples);
+    h.add(s.texelCells);
+    h.add(s.filterSigma);
+    h.add(s.glossyCutoff);
+    h.add(s.seed);
+    return h.value();
+}
+
+Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
+    validate(settings);
+    Vlf v;
+    v.mSettings = settings;
+    v.mDirections = std::make_shared<DirectionSet>(settings.directionLevel);
+    v.mKey = vlfKey(scene, settings);
+    const Aabb& b = scene.bounds();
+    v.mCenter = b.center();
+    v.mRadius = std::max(0.5f * glm::length(b.extent()) * 1.001f, 1e-6f);
+    const std::size_t l = v.mDirections->size();
+    for (std::size_t i = 0; i < l; ++i)
+        v.mFrames.push_back(makeSubfieldFrame(v.mDirections->direction(i)));
+
+    v.mFaces = scene.faces();
+    for (Face& f : v.mFaces)
+        f.triangles.clear();
+
+    // Irradiance maps with texel coverage from 4 x 4 samples per texel.
+    const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
+    std::uint32_t texels = 0;
+    for (const Face& f : v.mFaces) {
+        FaceMap m;
+        m.width = std::uint32_t(std::clamp(std::ceil(f.extentU / texel), 1.f, 4096.f));
+        m.height = std::uint32_t(std::clamp(std::ceil(f.extentV / texel), 1.f, 4096.f));
+        m.texelU = std::max(f.extentU / float(m.width), 1e-9f);
+        m.texelV = std::max(f.extentV / float(m.height), 1e-9f);
+        m.firstTexel = texels;
+        texels += m.width * m.height;
+        v.mFaceMaps.push_back(m);
+    }
+    v.mCoverage.assign(texels, 0.f);
+    v.mIrradiance.assign(texels, glm::vec3(0.f));
+    for (std::size_t fi = 0; fi < scene.faces().size(); ++fi) {
+        const Face& f = scene.faces()[fi];
+        const FaceMap& m = v.mFaceMaps[fi];
+        std::vector<std::uint8_t> hits(std::size_t(m.width) * m.height * 16, 0);
+        for (std::uint32_t ti : f.triangles) {
+            const VlfScene::Triangle& t = scene.triangles()[ti];
+            std::array<glm::vec2, 3> q;
+            int k = 0;
+            for (const glm::vec3& p : {t.p0, t.p1, t.p2})
+                q[k++] = glm::vec2(glm::dot(p - f.origin, f.axisU) / m.texelU,
+                                   glm::dot(p - f.origin, f.axisV) / m.texelV) *
+                         4.f; // in sub-sample units
+            const glm::vec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
+            const glm::vec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
+            const int x0 = std::max(0, int(std::floor(lo.x))),
+                      x1 = std::min(int(m.width * 4) - 1, int(hi.x));
+            const int y0 = std::max(0, int(std::floor(lo.y))),
+                      y1 = std::min(int(m.height * 4) - 1, int(hi.y));
+            for (int y = y0; y <= y1; ++y)
+                for (int x = x0; x <= x1; ++x)
+                    if (inside(q, glm::vec2(float(x) + 0.5f, float(y) + 0.5f)))
+                        hits[(std::size_t(y / 4) * m.width + x / 4) * 16 + (y % 4) * 4 + x % 4] = 1;
+        }
+        for (std::size_t tx = 0; tx < std::size_t(m.width) * m.height; ++tx) {
+            int n = 0;
+            for (int s = 0; s < 16; ++s)
+                n += hits[tx * 16 + s];
+            v.mCoverage[m.firstTexel + tx] = float(n) / 16.f;
+        }
+    }
+
+    // Tiles: a specular face gets tile (s, t) of subfield i when its projection comes within
+    // one cell of the tile, so every bilinear neighbour of a point on the face exists.
+    v.mSpecularIndex.assign(v.mFaces.size(), -1);
+    for (std::size_t fi = 0; fi < v.mFaces.size(); ++fi)
+        if (v.mFaces[fi].isSpecular()) {
+            v.mSpecularIndex[fi] = std::int32_t(v.mSpecularFaces.size());
+            v.mSpecularFaces.push_back(std::uint32_t(fi));
+        }
+    const int N = settings.linesPerSide, m = settings.tileSize, n = N / m;
+    const float h = v.cellWidth();
+    v.mBlocks.assign(v.mSpecularFaces.size() * l, TileBlock{});
+    for (std::size_t sf = 0; sf < v.mSpecularFaces.size(); ++sf) {
+        const Face& f = scene.faces()[v.mSpecularFaces[sf]];
+        for (std::size_t i = 0; i < l; ++i) {
+            TileBlock& block = v.mBlocks[sf * l + i];
+            const float c = glm::dot(f.normal, v.mDirections->direction(i));
+            if (std::abs(c) < 1e-4f) continue;
+            // Projected triangles in cell units.
+            std::vector<std::array<glm::vec2, 3>> tris;
+            glm::vec2 lo(1e30f), hi(-1e30f);
+            for (std::uint32_t ti : f.triangles) {
+                const VlfScene::Triangle& t = scene.triangles()[ti];
+                std::array<glm::vec2, 3> q;
+                int k = 0;
+                for (const glm::vec3& p : {t.p0, t.p1, t.p2}) {
+                    q[k] = (v.project(i, p) + 1.f) / h;
+                    lo = glm::min(lo, q[k]);
+                    hi = glm::max(hi, q[k]);
+                    ++k;
+                }
+                tris.push_back(q);
+            }
+            const int s0 = std::clamp(int(std::floor(lo.x - 1.f)) / m, 0, n - 1);
+            const int s1 = std::clamp(int(std::floor(hi.x + 1.f)) / m, 0, n - 1);
+            const int t0 = std::clamp(int(std::floor(lo.y - 1.f)) / m, 0, n - 1);
+            const int t1 = std::clamp(int(std::floor(hi.y + 1.f)) / m, 0, n - 1);
+            block.side = c > 0.f ? 1 : -1;
+            block.s0 = s0;
+            block.t0 = t0;
+            block.sw = s1 - s0 + 1;
+            block.tw = t1 - t0 + 1;
+            block.firstSlot = std::uint32_t(v.mSlots.size());
+            v.mSlots.resize(v.mSlots.size() + std::size_t(block.sw) * block.tw, -1);
+            for (int t = t0; t <= t1; ++t)
+                for (int s = s0; s <= s1; ++s) {
+                    const glm::vec2 boxLo(float(s * m) - 1.f, float(t * m) - 1.f);
+                    const glm::vec2 boxHi(float((s + 1) * m) + 1.f, float((t + 1) * m) + 1.f);
+                    bool hit = false;
+                    for (const auto& q : tris)
+                        if (overlaps(q, boxLo, boxHi)) {
+                            hit = true;
+                            break;
+                        }
+                    if (hit)
+                        v.mSlots[block.firstSlot + std::size_t(t - t0) * block.sw + (s - s0)] =
+                            std::int32_t(v.mTileCount++);
+                }
+        }
+    }
+    v.mTiles.assign(v.mTileCount * std::size_t(m) * m, glm::vec4(0.f));
+    return v;
+}
+
+float Vlf::lineArea() const {
+    const float w = cellWidth() * mRadius;
+    return w * w;
+}
+
+glm::vec2 Vlf::project(std::size_t psf, const glm::vec3& world) const {
+    const glm::vec3 p = (world - mCenter) / mRadius;
+    return {glm::dot(p, mFrames[psf].u), glm::dot(p, mFrames[psf].v)};
+}
+
+glm::vec3 Vlf::linePoint(std::size_t psf, const glm::vec2& uv) const {
+    return mCenter + mRadius * (uv.x * mFrames[psf].u + uv.y * mFrames[psf].v);
+}
+
+std::uint32_t Vlf::texelAt(std::uint32_t face, const glm::vec3& x) const {
+    const Face& f = mFaces[face];
+    const FaceMap& m = mFaceMaps[face];
+    const int tx = std::clamp(int(std::floor(glm::dot(x - f.origin, f.axisU) / m.texelU)), 0,
+                              int(m.width) - 1);
+    const int ty = std::clamp(int(std::floor(glm::dot(x - f.origin, f.axisV) / m.texelV)), 0,
+                              int(m.height) - 1);
+    return m.firstTexel + std::uint32_t(ty) * m.width + std::uint32_t(tx);
+}
+
+glm::vec3 Vlf::texelCenter(std::uint32_t face, std::uint32_t x, std::uint32_t y) const {
+    const Face& f = mFaces[face];
+    const FaceMap& m = mFaceMaps[face];
+    return f.origin + (float(x) + 0.5f) * m.texelU * f.axisU +
+           (float(y) + 0.5f) * m.texelV * f.axisV;
+}
+
+std::int32_t Vlf::tileAt(std::size_t sf, std::size_t psf, int i, int j) const {
+    const TileBlock& b = block(sf, psf);
+    if (b.side == 0 || i < 0 || j < 0) return -1;
+    const int m = mSettings.tileSize;
+    const int s = i / m - b.s0, t = j / m - b.t0;
+    if (s < 0 || t < 0 || s >= b.sw || t >= b.tw || i >= mSettings.linesPerSide ||
+        j >= mSettings.linesPerSide)
+        return -1;
+    return mSlots[b.firstSlot + std::size_t(t) * b.sw + s];
+}
+
+std::int64_t Vlf::cellIndex(std::size_t sf, std::size_t psf, int i, int j) const {
+    const std::int32_t tile = tileAt(sf, psf, i, j);
+    if (tile < 0) return -1;
+    const int m = mSettings.tileSize;
+    return std::int64_t(tile) * m * m + (j % m) * m + (i % m);
+}
+
+VlfMemory Vlf::memory() const {
+    VlfMemory mem;
+    const int m = mSettings.tileSize;
+    mem.directions = mDirections ? mDirections->size() : 0;
+    mem.tiles = mTileCount;
+    mem.tileCells = mTileCount * std::size_t(m) * m;
+    mem.diffuseTexels = mIrradiance.size();
+    const std::size_t index = mSlots.size() * sizeof(std::int32_t) +
+                              mBlocks.size() * sizeof(TileBlock) +
+                              mFaceMaps.size() * sizeof(FaceMap) + mCoverage.size() * sizeof(float);
+    mem.renderBytes =
+        mem.tileCells * sizeof(glm::vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
+    // The bake adds, per cell: unshot, next and incident (RGB) plus the incident weight and the
+    // incident total for mirrors (RGBA); per texel: unshot and next irradiance, and one
+    // per-thread accumulation copy (counted once).
+    mem.bakeBytes = mem.renderBytes +
+                    mem.tileCells * (3 * sizeof(glm::vec3) + sizeof(float) + sizeof(glm::vec4)) +
+                    mem.diffuseTexels * 3 * sizeof(glm::vec3);
+    return mem;
+}
+
+glm::vec3 Vlf::sampleTexels(const std::vector<glm::vec3>& texels, std::uint32_t face,
+                            const glm::vec3& x) const {
+    const Face& f = mFaces[face];
+    const FaceMap& m = mFaceMaps[face];
+    const float fx = glm::dot(x - f.origin, f.axisU) / m.texelU - 0.5f;
+    const float fy = glm::dot(x - f.origin, f.axisV) / m.texelV - 0.5f;
+    const int x0 = int(std::floor(fx)), y0 = int(std::floor(fy));
+    const float ax = fx - float(x0), ay = fy - float(y0);
+    glm::vec3 sum(0.f);
+    float wsum = 0.f;
+    for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+            const int tx = x0 + dx, ty = y0 + dy;
+            if (tx < 0 || ty < 0 || tx >= int(m.width) || ty >= int(m.height)) continue;
+            const std::size_t t = m.firstTexel + std::size_t(ty) * m.width + tx;
+            if (mCoverage[t] <= 0.f) continue;
+            const float w = (dx ? ax : 1.f - ax) * (dy ? ay : 1.f - ay);
+            sum += w * texels[t];
+            wsum += w;
+        }
+    if (wsum > 0.f) return sum / wsum;
+    return texels[texelAt(face, x)]; // outside every covered neighbour: the nearest texel
+}
+
+glm::vec3 Vlf::diffuseRadiance(std::uint32_t face, const glm::vec3& x) const {
+    const Face& f = mFaces[face];
+    constexpr float kInvPi = 0.31830988618f;
+    return f.emission + f.diffuse * kInvPi * sampleTexels(mIrradiance, face, x);
+}
+
+glm::vec3 Vlf::sampleCells(const std::vector<glm::vec4>& cells, std::size_t sf, std::size_t psf,
+                           const glm::vec3& x, float& wOut) const {
+    const float h = cellWidth();
+    const glm::vec2 c = (project(psf, x) + 1.f) / h - 0.5f;
+    const int i0 = int(std::floor(c.x)), j0 = int(std::floor(c.y));
+    // A point within 1e-4 cells of a cell centre (float rounding of the projection) takes
+    // that cell alone, so a lookup at a cell centre returns the stored value exactly.
+    const auto snap = [](float a) { return a < 1e-4f ? 0.f : a > 1.f - 1e-4f ? 1.f : a; };
+    const float ax = snap(c.x - float(i0)), ay = snap(c.y - float(j0));
+    glm::vec3 sum(0.f);
+    float wsum = 0.f;
+    for (int dj = 0; dj < 2; ++dj)
+        for (int di = 0; di < 2; ++di) {
+            const float w = (di ? ax : 1.f - ax) * (dj ? ay : 1.f - ay);
+            if (w <= 0.f) continue;
+            const std::int64_t k = cellIndex(sf, psf, i0 + di, j0 + dj);
+            if (k < 0 || cells[std::size_t(k)].w <= 0.f) continue;
+            sum += w * glm::vec3(cells[std::size_t(k)]);
+            wsum += w;
+        }
+    wOut = wsum;
+    return wsum > 0.f ? sum / wsum : glm::vec3(0.f);
+}
+
+std::optional<glm::vec3> Vlf::lookupTiles(const std::vector<glm::vec4>& cells, std::uint32_t face,
+                                          const glm::vec3& x, const glm::vec3& dir) const {
+    const std::int32_t sf = mSpecularIndex[face];
+    if (sf < 0) return std::nullopt;
+    const DirectionTriangle tri = mDirections->locate(dir);
+    glm::vec3 sum(0.f);
+    float wsum = 0.f;
+    for (int k = 0; k < 3; ++k) {
+        if (tri.weights[k] <= 0.f) continue;
+        const OrientedDirection& c = tri.corners[k];
+        // The face's tiles in this subfield hold light along block.side * direction; the
+        // corner is usable only when it is that orientation.
+        const TileBlock& b = block(std::size_t(sf), c.index);
+        if (b.side == 0 || float(b.side) != c.sign) continue;
+        float w = 0.f;
+        const glm::vec3 value = sampleCells(cells, std::size_t(sf), c.index, x, w);
+        if (w <= 0.f) continue;
+        sum += tri.weights[k] * value;
+        wsum += tri.weights[k];
+    }
+    if (wsum <= 0.f) return std::nullopt;
+    return sum / wsum;
+}
+
+glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x,
+                                const glm::vec3& toViewer) const {
+    const Face& f = mFaces[face];
+    if (!f.isSpecular()) return glm::vec3(0.f);
+    std::optional<glm::vec3> value;
+    if (f.isMirror()) {
+        // Tiles hold incident light, indexed by the front-side direction it arrives from:
+        // what the viewer sees arrives from the reflected view direction.
+        const glm::vec3 from = 2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer;
+        value = lookupTiles(mTiles, face, x, from);
+        if (value) *value *= f.specular;
+    } else {
+        value = lookupTiles(mTiles, face, x, toViewer);
+    }
+    return value.value_or(glm::vec3(0.f));
+}
+
+glm::vec3 Vlf::radiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer) const {
+    return diffuseRadiance(face, x) + specularRadiance(face, x, toViewer);
+}
+
+} // namespace qgi::vlf

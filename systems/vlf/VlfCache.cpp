@@ -1,0 +1,240 @@
+#include "systems/vlf/VlfCache.h"
+
+#include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
+#include "systems/vlf/VlfBake.h"
+#include "systems/vlf/VlfHash.h"
+
+#include <cstring>
+#include <fstream>
+#include <iterator>
+
+namespace qgi::vlf {
+namespace {
+
+constexpr char kMagic[8] = {'Q', 'G', 'I', 'V', 'L', 'F', '\r', '\n'};
+
+class Writer {
+public:
+    template <typename T> void put(const T& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        const auto* p = reinterpret_cast<const char*>(&v);
+        bytes.insert(bytes.end(), p, p + sizeof(T));
+    }
+    template <typename T> void putVector(const std::vector<T>& v) {
+        put(std::uint64_t(v.size()));
+        const auto* p = reinterpret_cast<const char*>(v.data());
+        bytes.insert(bytes.end(), p, p + v.size() * sizeof(T));
+    }
+    std::vector<char> bytes;
+};
+
+class Reader {
+public:
+    Reader(const std::vector<char>& b, const std::string& file) : bytes(b), path(file) {}
+    template <typename T> T get() {
+        static_assert(std::is_trivially_copyable_v<T>);
+        if (bytes.size() - pos < sizeof(T))
+            fail(path, ": VLF cache is corrupt (payload truncated)");
+        T v;
+        std::memcpy(&v, bytes.data() + pos, sizeof(T));
+        pos += sizeof(T);
+        return v;
+    }
+    template <typename T> std::vector<T> getVector(std::size_t expected = SIZE_MAX) {
+        const std::uint64_t n = get<std::uint64_t>();
+        if (n > (bytes.size() - pos) / sizeof(T) || (expected != SIZE_MAX && n != expected))
+            fail(path, ": VLF cache is corrupt (an array size does not match)");
+        std::vector<T> v(n);
+        std::memcpy(v.data(), bytes.data() + pos, n * sizeof(T));
+        pos += n * sizeof(T);
+        return v;
+    }
+    const std::vector<char>& bytes;
+    std::string path;
+    std::size_t pos = 0;
+};
+
+struct FacePod {
+    glm::vec3 normal;
+    float offset;
+    glm::vec3 origin, axisU, axisV;
+    float extentU, extentV, area;
+    glm::vec3 diffuse, emission, specular;
+    float phongExponent;
+};
+
+} // namespace
+
+void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
+    Writer w;
+    const VlfSettings& s = v.mSettings;
+    w.put(s.directionLevel);
+    w.put(s.linesPerSide);
+    w.put(s.tileSize);
+    w.put(s.iterations);
+    w.put(s.jitterSamples);
+    w.put(s.texelCells);
+    w.put(s.filterSigma);
+    w.put(s.glossyCutoff);
+    w.put(s.seed);
+    w.put(v.mCenter);
+    w.put(v.mRadius);
+    std::vector<FacePod> faces;
+    for (const Face& f : v.mFaces)
+        faces.push_back({f.normal, f.offset, f.origin, f.axisU, f.axisV, f.extentU, f.extentV,
+                         f.area, f.diffuse, f.emission, f.specular, f.phongExponent});
+    w.putVector(faces);
+    w.putVector(v.mFaceMaps);
+    w.putVector(v.mCoverage);
+    w.putVector(v.mIrradiance);
+    w.putVector(v.mSpecularIndex);
+    w.putVector(v.mSpecularFaces);
+    w.putVector(v.mBlocks);
+    w.putVector(v.mSlots);
+    w.put(std::uint64_t(v.mTileCount));
+    w.putVector(v.mTiles);
+
+    Hasher h;
+    h.addBytes(w.bytes.data(), w.bytes.size());
+    const std::filesystem::path tmp = path.string() + ".tmp";
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) fail(path.string(), ": cannot write the VLF cache");
+        out.write(kMagic, sizeof(kMagic));
+        const std::uint32_t version = kVersion;
+        const std::uint64_t key = v.mKey, size = w.bytes.size(), hash = h.value();
+        out.write(reinterpret_cast<const char*>(&version), sizeof(version));
+        out.write(reinterpret_cast<const char*>(&key), sizeof(key));
+        out.write(reinterpret_cast<const char*>(&size), sizeof(size));
+        out.write(reinterpret_cast<const char*>(&hash), sizeof(hash));
+        out.write(w.bytes.data(), std::streamsize(w.bytes.size()));
+        if (!out) fail(path.string(), ": writing the VLF cache failed");
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) fail(path.string(), ": cannot move the VLF cache into place: ", ec.message());
+}
+
+Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey) {
+    const std::string name = path.string();
+    std::ifstream in(path, std::ios::binary);
+    if (!in) fail(name, ": no VLF cache file");
+    char magic[8];
+    std::uint32_t version = 0;
+    std::uint64_t key = 0, size = 0, hash = 0;
+    in.read(magic, sizeof(magic));
+    if (!in || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
+        fail(name, ": not a VLF cache file (bad magic)");
+    in.read(reinterpret_cast<char*>(&version), sizeof(version));
+    in.read(reinterpret_cast<char*>(&key), sizeof(key));
+    in.read(reinterpret_cast<char*>(&size), sizeof(size));
+    in.read(reinterpret_cast<char*>(&hash), sizeof(hash));
+    if (!in) fail(name, ": VLF cache is corrupt (header truncated)");
+    if (version != kVersion)
+        fail(name, ": VLF cache has format version ", version, ", this build reads ", kVersion);
+    if (key != expectedKey)
+        fail(name, ": VLF cache is stale (it was baked for another scene or other settings)");
+    const std::uintmax_t fileSize = std::filesystem::file_size(path);
+    const std::uintmax_t header = sizeof(kMagic) + sizeof(version) + 3 * sizeof(std::uint64_t);
+    if (fileSize != header + size) fail(name, ": VLF cache is corrupt (file size does not match)");
+    std::vector<char> bytes(size);
+    in.read(bytes.data(), std::streamsize(size));
+    if (!in) fail(name, ": VLF cache is corrupt (payload truncated)");
+    Hasher h;
+    h.addBytes(bytes.data(), bytes.size());
+    if (h.value() != hash) fail(name, ": VLF cache is corrupt (payload hash does not match)");
+
+    Reader r(bytes, name);
+    Vlf v;
+    VlfSettings& s = v.mSettings;
+    s.directionLevel = r.get<int>();
+    s.linesPerSide = r.get<int>();
+    s.tileSize = r.get<int>();
+    s.iterations = r.get<int>();
+    s.jitterSamples = r.get<int>();
+    s.texelCells = r.get<float>();
+    s.filterSigma = r.get<float>();
+    s.glossyCutoff = r.get<float>();
+    s.seed = r.get<std::uint64_t>();
+    try {
+        validate(s);
+    } catch (const Error& e) {
+        fail(name, ": VLF cache is corrupt (", e.what(), ")");
+    }
+    v.mKey = key;
+    v.mCenter = r.get<glm::vec3>();
+    v.mRadius = r.get<float>();
+    v.mDirections = std::make_shared<DirectionSet>(s.directionLevel);
+    for (std::size_t i = 0; i < v.mDirections->size(); ++i)
+        v.mFrames.push_back(makeSubfieldFrame(v.mDirections->direction(i)));
+    for (const FacePod& p : r.getVector<FacePod>()) {
+        Face f;
+        f.normal = p.normal;
+        f.offset = p.offset;
+        f.origin = p.origin;
+        f.axisU = p.axisU;
+        f.axisV = p.axisV;
+        f.extentU = p.extentU;
+        f.extentV = p.extentV;
+        f.area = p.area;
+        f.diffuse = p.diffuse;
+        f.emission = p.emission;
+        f.specular = p.specular;
+        f.phongExponent = p.phongExponent;
+        v.mFaces.push_back(f);
+    }
+    const std::size_t nf = v.mFaces.size();
+    v.mFaceMaps = r.getVector<FaceMap>(nf);
+    std::size_t texels = 0;
+    for (const FaceMap& m : v.mFaceMaps) {
+        if (m.firstTexel != texels || m.width == 0 || m.height == 0)
+            fail(name, ": VLF cache is corrupt (irradiance maps do not line up)");
+        texels += std::size_t(m.width) * m.height;
+    }
+    v.mCoverage = r.getVector<float>(texels);
+    v.mIrradiance = r.getVector<glm::vec3>(texels);
+    v.mSpecularIndex = r.getVector<std::int32_t>(nf);
+    v.mSpecularFaces = r.getVector<std::uint32_t>();
+    for (std::uint32_t f : v.mSpecularFaces)
+        if (f >= nf) fail(name, ": VLF cache is corrupt (specular face out of range)");
+    v.mBlocks = r.getVector<TileBlock>(v.mSpecularFaces.size() * v.mDirections->size());
+    v.mSlots = r.getVector<std::int32_t>();
+    v.mTileCount = std::size_t(r.get<std::uint64_t>());
+    const int n = s.linesPerSide / s.tileSize;
+    for (const TileBlock& b : v.mBlocks)
+        if (b.side != 0 &&
+            (b.s0 < 0 || b.t0 < 0 || b.sw < 1 || b.tw < 1 || b.s0 + b.sw > n || b.t0 + b.tw > n ||
+             std::size_t(b.firstSlot) + std::size_t(b.sw) * b.tw > v.mSlots.size()))
+            fail(name, ": VLF cache is corrupt (a tile block is out of range)");
+    for (std::int32_t slot : v.mSlots)
+        if (slot < -1 || (slot >= 0 && std::size_t(slot) >= v.mTileCount))
+            fail(name, ": VLF cache is corrupt (a tile slot is out of range)");
+    v.mTiles = r.getVector<glm::vec4>(v.mTileCount * std::size_t(s.tileSize) * s.tileSize);
+    if (r.pos != bytes.size()) fail(name, ": VLF cache is corrupt (trailing bytes)");
+    return v;
+}
+
+Vlf VlfCache::loadOrBake(const VlfScene& scene, const VlfSettings& settings,
+                         const std::filesystem::path& path, bool* baked, VlfBakeStats* stats) {
+    validate(settings);
+    if (!path.empty()) {
+        try {
+            Vlf v = load(path, vlfKey(scene, settings));
+            if (baked) *baked = false;
+            logInfo("VLF: loaded ", path.string());
+            return v;
+        } catch (const Error& e) {
+            logWarning(e.what(), "; baking anew");
+        }
+    }
+    Vlf v = bakeVlf(scene, settings, stats);
+    if (baked) *baked = true;
+    if (!path.empty()) {
+        save(v, path);
+        logInfo("VLF: saved ", path.string());
+    }
+    return v;
+}
+
+} // namespace qgi::vlf

@@ -1,0 +1,38 @@
+#pragma once
+
+#include "systems/vlf/Vlf.h"
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+namespace qgi::vlf {
+
+struct VlfBakeStats;
+
+/** The VLF cache file: a versioned binary image of a baked Vlf, keyed by vlfKey(scene,
+ *  settings). Layout (little endian, as written by this machine):
+ *    8 bytes magic "QGIVLF\r\n", u32 format version, u64 key, u64 payload size,
+ *    u64 FNV-1a hash of the payload, payload (settings, frame, faces, maps, tiles).
+ *  load() rejects, with a qgi::Error naming the file and the reason, a file that is missing,
+ *  truncated, of another version, of another key (stale: the scene or settings changed) or
+ *  whose payload hash or internal sizes do not match (corrupt).                           */
+class VlfCache {
+public:
+    static constexpr std::uint32_t kVersion = 1;
+
+    /// Writes atomically (a temporary file renamed over the target). Throws qgi::Error when
+    /// the file cannot be written.
+    static void save(const Vlf& vlf, const std::filesystem::path& path);
+    /// Reads a file written by save() for `expectedKey`. Throws qgi::Error as described.
+    static Vlf load(const std::filesystem::path& path, std::uint64_t expectedKey);
+
+    /// Loads `path` when it holds this scene and settings; otherwise (missing, stale or
+    /// corrupt: the reason is logged as a warning) bakes and saves. `baked` tells which
+    /// happened. An empty path bakes without a cache.
+    static Vlf loadOrBake(const VlfScene& scene, const VlfSettings& settings,
+                          const std::filesystem::path& path, bool* baked = nullptr,
+                          VlfBakeStats* stats = nullptr);
+};
+
+} // namespace qgi::vlf

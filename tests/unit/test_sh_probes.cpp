@@ -1,0 +1,861 @@
+// The SH probe system (systems/sh_probes) on small hand-built scenes whose answers are known:
+// closed forms for what a probe sees, exact zeros where no light can arrive, and the
+// documented rules for staleness, budgets and interpolation weights.
+#include "systems/sh_probes/AvatarShExport.h"
+#include "systems/sh_probes/ProbeVolume.h"
+#include "systems/sh_probes/ShProbeSystem.h"
+
+#include "components/LightStandIn.h"
+#include "components/Avatar.h"
+#include "components/DirectionalLight.h"
+#include "components/ShLighting.h"
+#include "components/VertexIrradiance.h"
+#include "runtime/core/Error.h"
+#include "runtime/core/Finite.h"
+#include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonStore.h"
+#include "test_photon_scenes.h"
+
+#include <glm/gtc/constants.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+namespace qgi {
+namespace {
+
+using test::addMesh;
+using test::addPointLight;
+using test::boxMesh;
+using test::grey;
+using test::gridMesh;
+using test::translation;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+void addSceneInfo(Registry& registry, const glm::vec3& lo, const glm::vec3& hi,
+                  const glm::vec3& environment = glm::vec3(0.f)) {
+    SceneInfo& info = registry.ctx().emplace<SceneInfo>();
+    info.name = "test";
+    info.bounds.extend(lo);
+    info.bounds.extend(hi);
+    info.environment = environment;
+}
+
+Entity addAvatar(Registry& registry, const glm::vec3& at) {
+    const Entity e = registry.create();
+    registry.emplace<WorldTransform>(e, translation(at));
+    registry.emplace<Avatar>(e);
+    return e;
+}
+
+bool sameSh(const sh::ShRgb& a, const sh::ShRgb& b) {
+    return std::memcmp(a.data(), b.data(), sizeof(sh::ShRgb)) == 0;
+}
+
+double shNorm(const sh::ShRgb& a) {
+    double s = 0.0;
+    for (const glm::vec3& c : a)
+        s += double(glm::dot(c, c));
+    return std::sqrt(s);
+}
+
+// ---- settings ------------------------------------------------------------------------------
+
+TEST(ShProbes, AbsurdSettingsAreRejected) {
+    const auto rejects = [](auto edit) {
+        ShProbeSettings s;
+        edit(s);
+        EXPECT_THROW(ShProbeSystem{s}, Error);
+    };
+    rejects([](ShProbeSettings& s) { s.spacing = kNaN; });
+    rejects([](ShProbeSettings& s) { s.spacing = -1.f; });
+    rejects([](ShProbeSettings& s) { s.spacing = 1e-7f; });
+    rejects([](ShProbeSettings& s) { s.spacing = std::numeric_limits<float>::infinity(); });
+    rejects([](ShProbeSettings& s) { s.cellsAlongLongestAxis = 0; });
+    rejects([](ShProbeSettings& s) { s.raysPerProbe = 0; });
+    rejects([](ShProbeSettings& s) { s.raysPerProbe = 1u << 30; });
+    rejects([](ShProbeSettings& s) { s.backFaceShare = 0.f; });
+    rejects([](ShProbeSettings& s) { s.backFaceShare = kNaN; });
+    rejects([](ShProbeSettings& s) { s.backFaceShare = 1.5f; });
+    rejects([](ShProbeSettings& s) { s.influenceDistance = kNaN; });
+    rejects([](ShProbeSettings& s) { s.influenceDistance = -2.f; });
+    rejects([](ShProbeSettings& s) { s.visibilitySubdivisions = 0; });
+    rejects([](ShProbeSettings& s) { s.visibilitySubdivisions = 1000; });
+    rejects([](ShProbeSettings& s) { s.mobileSolidAngleShare = 0.f; });
+    rejects([](ShProbeSettings& s) { s.updateBudget = 1u << 30; });
+    rejects([](ShProbeSettings& s) { s.maxProbes = 0; });
+    rejects([](ShProbeSettings& s) { s.minDeltaEndPoints = 0; });
+    EXPECT_NO_THROW(ShProbeSystem{ShProbeSettings{}});
+}
+
+TEST(ShProbes, BuildRejectsMissingResourcesAndTooManyProbes) {
+    Registry world;
+    addMesh(world, boxMesh(glm::vec3(5.f), true), glm::mat4(1.f), grey(0.5f), false, "room");
+    ShProbeSystem system{ShProbeSettings{}};
+    EXPECT_THROW(system.build(world), Error); // no SceneInfo
+    addSceneInfo(world, glm::vec3(-5.f), glm::vec3(5.f));
+    EXPECT_THROW(system.build(world), Error); // no RayScene
+    test::buildRayScene(world);
+    ShProbeSettings fine;
+    fine.spacing = 1e-3f; // 10^12 probes
+    ShProbeSystem tooFine(fine);
+    EXPECT_THROW(tooFine.build(world), Error);
+    EXPECT_NO_THROW(system.build(world));
+    // Default spacing: the longest side / 16.
+    EXPECT_FLOAT_EQ(system.spacing(), 10.f / 16.f);
+
+    Registry empty;
+    empty.ctx().emplace<SceneInfo>(); // empty bounds, no spacing set
+    test::buildRayScene(empty);
+    ShProbeSystem noBounds{ShProbeSettings{}};
+    EXPECT_THROW(noBounds.build(empty), Error);
+}
+
+TEST(ShProbes, GridIsCentredOnTheBoundsWithTheGivenSpacing) {
+    Aabb bounds;
+    bounds.extend({-2.f, 0.f, -1.f});
+    bounds.extend({2.f, 2.f, 1.f});
+    const ProbeGrid grid = ProbeGrid::over(bounds, 0.5f);
+    EXPECT_EQ(grid.counts, glm::ivec3(8, 4, 4));
+    EXPECT_EQ(grid.probeCount(), 128u);
+    for (std::uint32_t p = 0; p < grid.probeCount(); ++p) {
+        const glm::vec3 x = grid.position(p);
+        EXPECT_GT(x.x, bounds.min.x);
+        EXPECT_LT(x.x, bounds.max.x);
+        EXPECT_EQ(grid.probeIndex(grid.probeCoords(p)), p);
+    }
+    EXPECT_NEAR(grid.position(0).x, -1.75f, 1e-6f);
+    EXPECT_NEAR(grid.position(grid.probeIndex({7, 3, 3})).y, 1.75f, 1e-6f);
+}
+
+// ---- what a probe sees ---------------------------------------------------------------------
+
+/// A probe 1 m above the middle of a 200 m floor. An infinite floor of radiance L fills the
+/// lower hemisphere, whose order-2 irradiance is exact: pi L facing down, 0 facing up (band 2
+/// of a hemisphere vanishes). The finite floor misses R^2/(R^2 + h^2) -> 1e-4 of it; the
+/// projection of the step at the horizon with N rays errs by about 1/sqrt(N) (the rays in
+/// the band of directions that straddles it): 0.8% at N = 16384. Tolerance 2%.
+struct FloorScene {
+    Registry world;
+    Entity floor;
+    ShProbeSystem system;
+
+    FloorScene(const ShProbeSettings& settings, const Material& material) : system(settings) {
+        floor =
+            addMesh(world, gridMesh({-100.f, 0.f, 100.f}, {200.f, 0.f, 0.f}, {0.f, 0.f, -200.f}, 4),
+                    glm::mat4(1.f), material, false, "floor");
+        addSceneInfo(world, {-0.5f, 0.5f, -0.5f}, {0.5f, 1.5f, 0.5f});
+        test::buildRayScene(world);
+    }
+    void run() {
+        system.build(world);
+        system.update(world, FrameContext{});
+        world.clearChanges();
+    }
+    /// Irradiance at the probe nearest (0, 1, 0) for normal n.
+    glm::vec3 irradiance(const glm::vec3& n) const {
+        const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
+        sh::ShRgb L;
+        EXPECT_TRUE(volume.interpolate({0.f, 1.f, 0.f}, L));
+        return sh::irradiance(L, n);
+    }
+};
+
+ShProbeSettings floorSettings(bool hybrid) {
+    ShProbeSettings s;
+    s.spacing = 1.f;
+    s.raysPerProbe = 16384;
+    s.hybrid = hybrid;
+    return s;
+}
+
+TEST(ShProbes, EmissiveFloorGivesPiLFromBelow) {
+    Material glow = grey(0.f);
+    glow.emission = {2.f, 1.f, 0.5f};
+    FloorScene scene(floorSettings(false), glow);
+    scene.run();
+    const glm::vec3 down = scene.irradiance({0.f, -1.f, 0.f});
+    const glm::vec3 up = scene.irradiance({0.f, 1.f, 0.f});
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(down[c], glm::pi<float>() * glow.emission[c],
+                    0.02f * glm::pi<float>() * glow.emission[c]);
+        EXPECT_NEAR(up[c], 0.f, 0.02f * glm::pi<float>() * glow.emission[c]);
+    }
+}
+
+TEST(ShProbes, HybridProbesDoNotSeeALampTheShaderDrawsThroughItsStandIn) {
+    // The emissive floor with a stand-in bulb at its place: in hybrid mode the avatar shader
+    // draws the lamp through the bulb, so the probes leave its emission out (in photon mode
+    // the bulb is dark and the probes must see the lamp).
+    Material glow = grey(0.f);
+    glow.emission = {2.f, 1.f, 0.5f};
+    for (const bool hybrid : {false, true}) {
+        FloorScene scene(floorSettings(hybrid), glow);
+        const Entity bulb = test::addPointLight(scene.world, {0.f, -0.5f, 0.f}, 1.f);
+        scene.world.emplace<LightStandIn>(bulb);
+        scene.run();
+        const glm::vec3 down = scene.irradiance({0.f, -1.f, 0.f});
+        if (hybrid) EXPECT_NEAR(down.x, 0.f, 1e-4f); // the bulb is below the floor: no light
+        else EXPECT_NEAR(down.x, glm::pi<float>() * 2.f, 0.02f * glm::pi<float>() * 2.f);
+    }
+}
+
+TEST(ShProbes, FloorReflectsItsVertexIrradiance) {
+    // Photon mode: radiance = albedo / pi x the interpolated per-vertex irradiance.
+    const float albedo = 0.6f;
+    FloorScene scene(floorSettings(false), grey(albedo));
+    const glm::vec3 e0(30.f, 20.f, 10.f);
+    VertexIrradiance& vi = scene.world.emplace<VertexIrradiance>(scene.floor);
+    vi.irradiance.assign(scene.world.get<Mesh>(scene.floor).positions.size(), e0);
+    scene.run();
+    const glm::vec3 down = scene.irradiance({0.f, -1.f, 0.f});
+    for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(down[c], albedo * e0[c], 0.02f * albedo * e0[c]);
+}
+
+TEST(ShProbes, HybridModeAddsTheSunOnTheFloorButNotAtTheProbe) {
+    // Sun straight down, 50 W/m^2: the floor's radiance is albedo / pi x 50 (shadow rays), so
+    // the probe facing down gets albedo x 50; the sun itself is the renderer's in hybrid mode.
+    const float albedo = 0.5f;
+    FloorScene scene(floorSettings(true), grey(albedo));
+    const Entity sun = scene.world.create();
+    glm::mat4 pose(1.f);
+    pose[2] = glm::vec4(0.f, 1.f, 0.f, 0.f); // local -Z = world -Y
+    pose[1] = glm::vec4(0.f, 0.f, -1.f, 0.f);
+    scene.world.emplace<WorldTransform>(sun, pose);
+    scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
+    scene.run();
+    EXPECT_NEAR(scene.irradiance({0.f, -1.f, 0.f}).x, albedo * 50.f, 0.02f * albedo * 50.f);
+    EXPECT_NEAR(scene.irradiance({0.f, 1.f, 0.f}).x, 0.f, 0.02f * albedo * 50.f);
+}
+
+TEST(ShProbes, HybridLightPickingIsUnbiased) {
+    // Two suns: 50 W/m^2 straight down and 30 W/m^2 at 60 degrees from the vertical. The
+    // floor's irradiance is 50 + 30 cos 60 = 65 W/m^2; each hit traces one shadow ray to one
+    // of them, picked in proportion to its share, so the mean over the probe's 16384 rays
+    // must still give albedo x 65 facing down (the picking's own noise, a few per mille over
+    // that many rays, is inside the 2% tolerance of the floor scenes).
+    const float albedo = 0.5f;
+    FloorScene scene(floorSettings(true), grey(albedo));
+    const auto addSun = [&](const glm::vec3& travel, float irradiance) {
+        const Entity sun = scene.world.create();
+        scene.world.emplace<WorldTransform>(
+            sun, glm::inverse(glm::lookAtRH(glm::vec3(0.f), travel, glm::vec3(1.f, 0.f, 0.f))));
+        scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), irradiance});
+    };
+    addSun({0.f, -1.f, 0.f}, 50.f);
+    addSun({std::sin(glm::radians(60.f)), -std::cos(glm::radians(60.f)), 0.f}, 30.f);
+    scene.run();
+    EXPECT_NEAR(scene.irradiance({0.f, -1.f, 0.f}).x, albedo * 65.f, 0.02f * albedo * 65.f);
+}
+
+TEST(ShProbes, PhotonModeCarriesTheSunAtTheProbe) {
+    // Photon mode, floor without per-vertex irradiance (reflects nothing): the probe holds the
+    // sun as a directional source, whose order-2 irradiance facing it is 17/16 of 50 W/m^2
+    // (Legendre series 1/4 + 1/2 + 5/16), and 1/4 - 5/32 of it at grazing incidence.
+    FloorScene scene(floorSettings(false), grey(0.5f));
+    const Entity sun = scene.world.create();
+    glm::mat4 pose(1.f);
+    pose[2] = glm::vec4(0.f, 1.f, 0.f, 0.f);
+    pose[1] = glm::vec4(0.f, 0.f, -1.f, 0.f);
+    scene.world.emplace<WorldTransform>(sun, pose);
+    scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
+    scene.run();
+    EXPECT_NEAR(scene.irradiance({0.f, 1.f, 0.f}).x, 50.f * 17.f / 16.f, 1e-3f * 50.f);
+    EXPECT_NEAR(scene.irradiance({1.f, 0.f, 0.f}).x, 50.f * (0.25f - 5.f / 32.f), 1e-3f * 50.f);
+}
+
+TEST(ShProbes, ConstantEnvironmentGivesPiL) {
+    // Nothing but sky: every probe's irradiance is pi L for every normal. The projection's
+    // constant term is exact; the Fibonacci rule's error on the degree 1-2 harmonics is
+    // O(log N / N), well under 0.5% at N = 4096.
+    Registry world;
+    addMesh(world, boxMesh(glm::vec3(0.01f)), translation({50.f, 50.f, 50.f}), grey(0.f), false,
+            "speck");
+    const glm::vec3 sky(1.f, 1.3f, 1.8f);
+    addSceneInfo(world, glm::vec3(-1.f), glm::vec3(1.f), sky);
+    test::buildRayScene(world);
+    ShProbeSettings s;
+    s.spacing = 1.f;
+    s.raysPerProbe = 4096;
+    ShProbeSystem system(s);
+    system.build(world);
+    system.update(world, FrameContext{});
+    const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
+    for (std::uint32_t p = 0; p < volume.probeCount(); ++p) {
+        EXPECT_TRUE(volume.enabled(p));
+        for (const glm::vec3 n : {glm::vec3(1, 0, 0), glm::vec3(0, -1, 0), glm::vec3(0, 0, 1),
+                                  glm::normalize(glm::vec3(1, 1, -1))}) {
+            const glm::vec3 e = sh::irradiance(volume.coefficients(p), n);
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(e[c], glm::pi<float>() * sky[c], 5e-3f * glm::pi<float>() * sky[c]);
+        }
+    }
+}
+
+TEST(ShProbes, ProjectionIsDeterministicAndSeeded) {
+    const auto project = [](std::uint64_t seed) {
+        Registry world;
+        const Entity room = addMesh(world, boxMesh({2.f, 1.f, 2.f}, true), glm::mat4(1.f),
+                                    grey(0.5f), false, "room");
+        addPointLight(world, {0.5f, 0.5f, 0.f}, 5.f);
+        addSceneInfo(world, {-2.f, -1.f, -2.f}, {2.f, 1.f, 2.f}, glm::vec3(0.f));
+        VertexIrradiance& vi = world.emplace<VertexIrradiance>(room);
+        const Mesh& mesh = world.get<Mesh>(room);
+        for (const glm::vec3& p : mesh.positions)
+            vi.irradiance.push_back(glm::vec3(1.f + p.x + p.y * p.z));
+        test::buildRayScene(world);
+        ShProbeSettings s;
+        s.spacing = 0.8f;
+        s.raysPerProbe = 64;
+        s.seed = seed;
+        ShProbeSystem system(s);
+        system.build(world);
+        system.update(world, FrameContext{});
+        const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
+        std::vector<sh::ShRgb> out;
+        for (std::uint32_t p = 0; p < volume.probeCount(); ++p)
+            out.push_back(volume.coefficients(p));
+        // A re-projection of the unchanged scene is bit-identical.
+        system.projectAll(world);
+        for (std::uint32_t p = 0; p < volume.probeCount(); ++p)
+            EXPECT_TRUE(sameSh(out[p], volume.coefficients(p)));
+        return out;
+    };
+    const auto a = project(7), b = project(7), c = project(8);
+    ASSERT_EQ(a.size(), b.size());
+    bool differs = false;
+    for (std::size_t p = 0; p < a.size(); ++p) {
+        EXPECT_TRUE(sameSh(a[p], b[p]));
+        differs = differs || !sameSh(a[p], c[p]);
+    }
+    EXPECT_TRUE(differs) << "the seed must change the ray directions";
+}
+
+// ---- disabled probes -----------------------------------------------------------------------
+
+/// A floor with a solid block on it; probes at x, z in {-0.2, 0.2} and y in {0.2, 0.6} lie
+/// inside the block.
+struct BlockScene {
+    Registry world;
+    ShProbeSystem system;
+    BlockScene() : system(settings()) {
+        addMesh(world, gridMesh({-2.f, 0.f, 2.f}, {4.f, 0.f, 0.f}, {0.f, 0.f, -4.f}, 4),
+                glm::mat4(1.f), grey(0.5f), false, "floor");
+        addMesh(world, boxMesh(glm::vec3(0.45f)), translation({0.f, 0.45f, 0.f}), grey(0.5f), false,
+                "block");
+        addPointLight(world, {1.f, 1.9f, 1.f}, 5.f);
+        addSceneInfo(world, {-2.f, 0.f, -2.f}, {2.f, 2.f, 2.f});
+        test::buildRayScene(world);
+        system.build(world);
+        system.update(world, FrameContext{});
+        world.clearChanges();
+    }
+    static ShProbeSettings settings() {
+        ShProbeSettings s;
+        s.spacing = 0.4f;
+        s.raysPerProbe = 128;
+        return s;
+    }
+    static bool insideBlock(const glm::vec3& p) {
+        return std::abs(p.x) < 0.45f && std::abs(p.z) < 0.45f && p.y > 0.f && p.y < 0.9f;
+    }
+};
+
+TEST(ShProbes, ProbesInsideGeometryAreDisabled) {
+    BlockScene scene;
+    const ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
+    int inside = 0;
+    for (std::uint32_t p = 0; p < volume.probeCount(); ++p) {
+        const bool in = BlockScene::insideBlock(volume.grid().position(p));
+        inside += in;
+        EXPECT_EQ(volume.enabled(p), !in)
+            << "probe at " << volume.grid().position(p).x << "," << volume.grid().position(p).y
+            << "," << volume.grid().position(p).z;
+    }
+    EXPECT_EQ(inside, 8);
+}
+
+TEST(ShProbes, DisabledProbesNeverContribute) {
+    BlockScene scene;
+    ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
+    // Poison the disabled probes: any weight on them would show as NaN.
+    for (std::uint32_t p = 0; p < volume.probeCount(); ++p)
+        if (!volume.enabled(p)) volume.coefficients(p).fill(glm::vec3(kNaN));
+    std::vector<Entity> avatars;
+    for (int i = 0; i <= 20; ++i)
+        for (int j = 0; j <= 8; ++j) {
+            const glm::vec3 at(-1.f + 0.1f * float(i), 0.05f + 0.2f * float(j), 0.47f);
+            avatars.push_back(addAvatar(scene.world, at));
+            ProbeBlend blend;
+            sh::ShRgb L;
+            if (!volume.interpolate(at, L, &blend)) continue;
+            for (int c = 0; c < 8; ++c)
+                if (!volume.enabled(blend.probes[c])) {
+                    EXPECT_EQ(blend.weights[c], 0.f);
+                }
+        }
+    scene.system.update(scene.world, FrameContext{1});
+    int lit = 0;
+    for (const Entity e : avatars) {
+        const ShLighting* sh = scene.world.tryGet<ShLighting>(e);
+        ASSERT_NE(sh, nullptr);
+        for (const glm::vec3& c : sh->coefficients)
+            EXPECT_TRUE(isFinite(c));
+        lit += sh->coefficients[0].x > 0.f;
+    }
+    EXPECT_GT(lit, 100); // the light reaches them: the test is not about zeros
+}
+
+// ---- light leaks ---------------------------------------------------------------------------
+
+/// Two rooms, 4 x 2 x 2 m, split by a 2 cm wall at x = 0.05 .. 0.07 that lies between probe
+/// layers (x = -0.25, 0.25) and between visibility lattice points (x = 0, 0.125). The left
+/// room holds a point light; nothing can reach the right room.
+struct TwoRooms {
+    Registry world;
+    ShProbeSystem system;
+    TwoRooms() : system(settings()) {
+        addMesh(world, boxMesh({2.f, 1.f, 1.f}, true), translation({0.f, 1.f, 0.f}), grey(0.7f),
+                false, "rooms");
+        addMesh(world, boxMesh({0.01f, 1.02f, 1.02f}), translation({0.06f, 1.f, 0.f}), grey(0.7f),
+                false, "wall");
+        addPointLight(world, {-1.f, 1.f, 0.f}, 10.f);
+        addSceneInfo(world, {-2.f, 0.f, -1.f}, {2.f, 2.f, 1.f});
+        test::buildRayScene(world);
+        system.build(world);
+        system.update(world, FrameContext{});
+        world.clearChanges();
+    }
+    static ShProbeSettings settings() {
+        ShProbeSettings s;
+        s.spacing = 0.5f;
+        s.raysPerProbe = 64;
+        return s; // lattice step 0.5 / 4 = 0.125 m
+    }
+};
+
+TEST(ShProbes, AvatarInTheDarkRoomStaysDark) {
+    TwoRooms rooms;
+    const ProbeVolume& volume = rooms.world.ctx().get<ProbeVolume>();
+    // Avatars in the dark room at least one lattice step (0.125 m) from the wall's face
+    // (x = 0.07), among them some in the cells that straddle the wall.
+    std::vector<Entity> dark, lit;
+    for (int i = 0; i < 12; ++i)
+        for (int j = 0; j < 5; ++j)
+            for (int k = 0; k < 5; ++k) {
+                const float x = 0.2f + 0.15f * float(i), y = 0.1f + 0.45f * float(j),
+                            z = -0.9f + 0.45f * float(k);
+                dark.push_back(addAvatar(rooms.world, {x, y, z}));
+                lit.push_back(addAvatar(rooms.world, {-x - 0.14f, y, z}));
+            }
+    rooms.system.update(rooms.world, FrameContext{1});
+    EXPECT_EQ(rooms.system.lastFrame().avatars, dark.size() + lit.size());
+    for (const Entity e : dark)
+        EXPECT_EQ(shNorm(rooms.world.get<ShLighting>(e).coefficients), 0.0)
+            << "light leaked to x = " << rooms.world.get<WorldTransform>(e).matrix[3].x;
+    for (const Entity e : lit)
+        EXPECT_GT(rooms.world.get<ShLighting>(e).coefficients[0].x, 0.f);
+
+    // Not vacuous: the cells next to the wall have lit corner probes, so plain trilinear
+    // interpolation (visibility ignored) would leak into the dark room there.
+    const glm::vec3 nearWall(0.2f, 1.1f, 0.1f);
+    glm::ivec3 cell;
+    glm::vec3 t;
+    volume.grid().locate(nearWall, cell, t);
+    double litCorners = 0.0;
+    for (int c = 0; c < 8; ++c)
+        litCorners += shNorm(volume.coefficients(
+            volume.grid().probeIndex(cell + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1))));
+    EXPECT_GT(litCorners, 0.0);
+}
+
+TEST(ShProbes, InterpolationIsContinuousAcrossCells) {
+    // Walk through the lit room across cell faces in x, y and z. At a face the value from
+    // either side must agree to float rounding (1e-4 of the corner values' spread), while one
+    // spacing apart it changes by a sizeable part of that spread (so the check can fail).
+    TwoRooms rooms;
+    const ProbeVolume& volume = rooms.world.ctx().get<ProbeVolume>();
+    // Visibility lattices for the cells the walk crosses.
+    for (int i = 0; i <= 30; ++i)
+        addAvatar(rooms.world, {-1.9f + 0.06f * float(i), 0.8f, 0.1f});
+    for (int i = 0; i <= 30; ++i)
+        addAvatar(rooms.world, {-1.1f, 0.1f + 0.06f * float(i), 0.1f});
+    for (int i = 0; i <= 30; ++i)
+        addAvatar(rooms.world, {-1.1f, 0.8f, -0.95f + 0.06f * float(i)});
+    rooms.system.update(rooms.world, FrameContext{1});
+    const auto at = [&](const glm::vec3& p) {
+        sh::ShRgb L;
+        EXPECT_TRUE(volume.interpolate(p, L));
+        return L;
+    };
+    const auto distance = [](const sh::ShRgb& a, const sh::ShRgb& b) {
+        double s = 0.0;
+        for (int i = 0; i < 9; ++i)
+            s += double(glm::dot(a[i] - b[i], a[i] - b[i]));
+        return std::sqrt(s);
+    };
+    const float eps = 1e-5f;
+    int faces = 0;
+    for (const float face : {-1.75f, -1.25f, -0.75f}) { // x faces
+        const glm::vec3 p(face, 0.8f, 0.1f);
+        const double jump = distance(at(p - glm::vec3(eps, 0, 0)), at(p + glm::vec3(eps, 0, 0)));
+        const double change =
+            distance(at(p - glm::vec3(0.25f, 0, 0)), at(p + glm::vec3(0.25f, 0, 0)));
+        EXPECT_LT(jump, 1e-3 * change) << "x face " << face;
+        ++faces;
+    }
+    for (const float face : {0.75f, 1.25f}) { // y faces
+        const glm::vec3 p(-1.1f, face, 0.1f);
+        const double jump = distance(at(p - glm::vec3(0, eps, 0)), at(p + glm::vec3(0, eps, 0)));
+        const double change =
+            distance(at(p - glm::vec3(0, 0.25f, 0)), at(p + glm::vec3(0, 0.25f, 0)));
+        EXPECT_LT(jump, 1e-3 * change) << "y face " << face;
+        ++faces;
+    }
+    for (const float face : {-0.25f, 0.25f}) { // z faces
+        const glm::vec3 p(-1.1f, 0.8f, face);
+        const double jump = distance(at(p - glm::vec3(0, 0, eps)), at(p + glm::vec3(0, 0, eps)));
+        const double change =
+            distance(at(p - glm::vec3(0, 0, 0.25f)), at(p + glm::vec3(0, 0, 0.25f)));
+        EXPECT_LT(jump, 1e-3 * change) << "z face " << face;
+        ++faces;
+    }
+    EXPECT_EQ(faces, 7);
+}
+
+TEST(ShProbes, InterpolationIsContinuousWhereVisibilityIsPartial) {
+    // Along the block's side (z = 0.55, just outside its face at 0.45) the cells hold probes
+    // inside the block (disabled) and lattice points that see only some corners. Crossing the
+    // x faces there, the two sides must still agree to float rounding.
+    BlockScene scene;
+    const ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
+    for (int i = 0; i <= 40; ++i)
+        addAvatar(scene.world, {-1.f + 0.05f * float(i), 0.5f, 0.55f});
+    scene.system.update(scene.world, FrameContext{1});
+    const auto at = [&](const glm::vec3& p) {
+        sh::ShRgb L;
+        EXPECT_TRUE(volume.interpolate(p, L));
+        return L;
+    };
+    const auto distance = [](const sh::ShRgb& a, const sh::ShRgb& b) {
+        double s = 0.0;
+        for (int i = 0; i < 9; ++i)
+            s += double(glm::dot(a[i] - b[i], a[i] - b[i]));
+        return std::sqrt(s);
+    };
+    int partial = 0;
+    for (const float face : {-0.6f, -0.2f, 0.2f, 0.6f}) {
+        const glm::vec3 p(face, 0.5f, 0.55f), dx(1e-5f, 0.f, 0.f), step(0.2f, 0.f, 0.f);
+        for (const glm::vec3& side : {p - 0.5f * step, p + 0.5f * step}) {
+            glm::ivec3 cell;
+            glm::vec3 t;
+            volume.grid().locate(side, cell, t);
+            const std::uint32_t index = volume.grid().cellIndex(cell);
+            partial += volume.visibilityReady(index) && !volume.visibilityOpen(index);
+        }
+        const double jump = distance(at(p - dx), at(p + dx));
+        const double change = distance(at(p - step), at(p + step));
+        EXPECT_LT(jump, 1e-3 * change) << "x face " << face;
+    }
+    EXPECT_GT(partial, 0) << "no crossed cell has partial visibility: the test would be vacuous";
+}
+
+// ---- following the scene -------------------------------------------------------------------
+
+/// A 6 x 2 x 6 m room with glowing walls (per-vertex irradiance), a point light and a mobile
+/// cube; photon mode, no photon transport (no PhotonDelta).
+struct MobileRoom {
+    Registry world;
+    Entity cube;
+    ShProbeSystem system;
+    explicit MobileRoom(std::uint32_t budget, std::uint32_t minDeltaEndPoints = 4)
+        : system(settings(budget, minDeltaEndPoints)) {
+        const Entity room =
+            addMesh(world, test::gridMesh({-3.f, 0.f, 3.f}, {6.f, 0.f, 0.f}, {0.f, 0.f, -6.f}, 12),
+                    glm::mat4(1.f), grey(0.5f), false, "floor");
+        VertexIrradiance& vi = world.emplace<VertexIrradiance>(room);
+        for (const glm::vec3& p : world.get<Mesh>(room).positions)
+            vi.irradiance.push_back(glm::vec3(4.f + p.x, 4.f - p.z, 4.f));
+        addMesh(world, boxMesh({3.f, 1.f, 3.f}, true), translation({0.f, 1.f, 0.f}), grey(0.f),
+                false, "walls");
+        cube = addMesh(world, boxMesh(glm::vec3(0.2f)), translation({-1.5f, 0.3f, 0.f}), grey(0.5f),
+                       true, "cube");
+        addPointLight(world, {0.f, 1.8f, 0.f}, 10.f);
+        addSceneInfo(world, {-3.f, 0.f, -3.f}, {3.f, 2.f, 3.f});
+        test::buildRayScene(world);
+        system.build(world);
+        system.update(world, FrameContext{});
+        world.clearChanges();
+    }
+    static ShProbeSettings settings(std::uint32_t budget, std::uint32_t minDeltaEndPoints) {
+        ShProbeSettings s;
+        s.minDeltaEndPoints = minDeltaEndPoints;
+        s.spacing = 0.5f;
+        s.raysPerProbe = 64;
+        s.updateBudget = budget;
+        return s;
+    }
+    void moveCube(const glm::vec3& to, std::uint64_t frame) {
+        world.patch<WorldTransform>(cube).matrix = translation(to);
+        world.ctx().get<RayScene>().syncMoved(world);
+        system.update(world, FrameContext{frame});
+        world.clearChanges();
+    }
+    std::vector<sh::ShRgb> probes() const {
+        const ProbeVolume& v = world.ctx().get<ProbeVolume>();
+        std::vector<sh::ShRgb> out;
+        for (std::uint32_t p = 0; p < v.probeCount(); ++p)
+            out.push_back(v.coefficients(p));
+        return out;
+    }
+};
+
+TEST(ShProbes, UnchangedSceneRefreshesNothing) {
+    MobileRoom room(1000);
+    const auto before = room.probes();
+    for (std::uint64_t f = 1; f <= 3; ++f) {
+        room.system.update(room.world, FrameContext{f});
+        room.world.clearChanges();
+        EXPECT_EQ(room.system.lastFrame().markedStale, 0u);
+        EXPECT_EQ(room.system.lastFrame().refreshed, 0u);
+    }
+    const auto after = room.probes();
+    for (std::size_t p = 0; p < before.size(); ++p)
+        EXPECT_TRUE(sameSh(before[p], after[p]));
+}
+
+bool segmentCrossesBox(const glm::vec3& a, const glm::vec3& b, const Aabb& box) {
+    // Dense sampling of the segment: enough for the few-centimetre margins in this test.
+    for (int k = 0; k <= 2000; ++k) {
+        const glm::vec3 p = a + (b - a) * (float(k) / 2000.f);
+        if (glm::all(glm::greaterThanEqual(p, box.min - 0.01f)) &&
+            glm::all(glm::lessThanEqual(p, box.max + 0.01f)))
+            return true;
+    }
+    return false;
+}
+
+TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
+    MobileRoom room(100000);
+    const auto before = room.probes();
+    const glm::vec3 from(-1.5f, 0.3f, 0.f), to(-1.2f, 0.3f, 0.f);
+    room.moveCube(to, 1);
+    const auto after = room.probes();
+    EXPECT_EQ(room.system.staleCount(), 0u); // the budget covered every stale probe
+
+    // The region, by the documented rule: within max(influence, rho / (2 sqrt(share))) of the
+    // old or new box, or (photon mode) the probe's segment to the light crosses either box.
+    const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
+    const auto boxAt = [](const glm::vec3& c) { return Aabb{c - 0.2f, c + 0.2f}; };
+    const float rho = 0.5f * glm::length(glm::vec3(0.4f));
+    const float reach = std::max(room.system.influenceDistance(),
+                                 rho / (2.f * std::sqrt(ShProbeSettings{}.mobileSolidAngleShare)));
+    const glm::vec3 light(0.f, 1.8f, 0.f);
+    std::size_t changed = 0, inRegion = 0;
+    for (std::uint32_t p = 0; p < before.size(); ++p) {
+        const glm::vec3 x = grid.position(p);
+        bool region = false;
+        for (const Aabb& box : {boxAt(from), boxAt(to)}) {
+            const glm::vec3 d = x - glm::clamp(x, box.min, box.max);
+            region = region || glm::length(d) <= reach + 1e-4f || segmentCrossesBox(x, light, box);
+        }
+        inRegion += region;
+        if (!sameSh(before[p], after[p])) {
+            ++changed;
+            EXPECT_TRUE(region) << "probe " << p << " at " << x.x << "," << x.y << "," << x.z
+                                << " changed outside the influence region";
+        }
+    }
+    EXPECT_GT(changed, 10u);
+    EXPECT_LT(inRegion, before.size() / 2); // the region is a part of the volume, not all of it
+
+    // The refreshed probes equal a fresh projection of the whole volume at the new pose.
+    room.system.projectAll(room.world);
+    const auto fresh = room.probes();
+    for (std::uint32_t p = 0; p < before.size(); ++p)
+        if (!sameSh(before[p], after[p])) {
+            EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
+        }
+}
+
+TEST(ShProbes, UpdateBudgetIsRespectedNearestAvatarFirst) {
+    MobileRoom room(7);
+    const glm::vec3 avatarAt(2.2f, 0.9f, -2.2f);
+    addAvatar(room.world, avatarAt);
+    room.system.markAllStale();
+    const std::size_t total = room.world.ctx().get<ProbeVolume>().probeCount();
+    ASSERT_EQ(room.system.staleCount(), total);
+    room.system.update(room.world, FrameContext{1});
+    const auto& stats = room.system.lastFrame();
+    EXPECT_EQ(stats.refreshed, 7u);
+    EXPECT_EQ(stats.staleAfter, total - 7);
+    // Nearest first: no probe left stale is nearer (in cells, Chebyshev) to the avatar than
+    // the farthest one refreshed.
+    const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
+    glm::ivec3 cell;
+    glm::vec3 t;
+    grid.locate(avatarAt, cell, t);
+    const glm::ivec3 nearest = cell + glm::ivec3(glm::round(t));
+    const auto cells = [&](std::uint32_t p) {
+        const glm::ivec3 d = glm::abs(grid.probeCoords(p) - nearest);
+        return std::max({d.x, d.y, d.z});
+    };
+    int farthestRefreshed = 0;
+    for (const std::uint32_t p : room.system.lastRefreshed()) {
+        EXPECT_FALSE(room.system.isStale(p));
+        farthestRefreshed = std::max(farthestRefreshed, cells(p));
+    }
+    for (std::uint32_t p = 0; p < total; ++p)
+        if (room.system.isStale(p)) {
+            EXPECT_GE(cells(p), farthestRefreshed);
+        }
+    // Later frames drain the rest at the same pace.
+    room.system.update(room.world, FrameContext{2});
+    EXPECT_EQ(room.system.lastFrame().refreshed, 7u);
+    EXPECT_EQ(room.system.staleCount(), total - 14);
+}
+
+TEST(ShProbes, AvatarNextToAMovedMobileReactsWithinAFewFrames) {
+    // Budget 8. The avatar's 8 corner probes lie within one cell (Chebyshev) of its nearest
+    // probe, among at most 27 such probes, so nearest-first refreshes them all within
+    // ceil(27 / 8) = 4 frames, while probes far from the avatar are still waiting.
+    MobileRoom room(8);
+    const glm::vec3 avatarAt(-1.1f, 0.6f, 0.4f);
+    const Entity avatar = addAvatar(room.world, avatarAt);
+    room.system.update(room.world, FrameContext{1});
+    room.world.clearChanges();
+    room.moveCube({-1.2f, 0.3f, 0.f}, 2);
+    for (std::uint64_t f = 3; f < 6; ++f) {
+        room.system.update(room.world, FrameContext{f});
+        room.world.clearChanges();
+    }
+    const ProbeVolume& volume = room.world.ctx().get<ProbeVolume>();
+    glm::ivec3 cell;
+    glm::vec3 t;
+    volume.grid().locate(avatarAt, cell, t);
+    for (int c = 0; c < 8; ++c)
+        EXPECT_FALSE(room.system.isStale(
+            volume.grid().probeIndex(cell + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1))));
+    EXPECT_GT(room.system.staleCount(), 0u) << "everything refreshed: priority not exercised";
+    // The avatar's lighting is the interpolation of the refreshed probes.
+    sh::ShRgb expected;
+    ASSERT_TRUE(volume.interpolate(avatarAt, expected));
+    EXPECT_TRUE(sameSh(room.world.get<ShLighting>(avatar).coefficients, expected));
+}
+
+TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
+    // Budget 0: stale probes stay stale, so the marks can be inspected. One end point per
+    // half-cell marks (minDeltaEndPoints = 1); the default 4 would ignore it.
+    MobileRoom room(0, 1);
+    PhotonDelta& delta = room.world.ctx().emplace<PhotonDelta>();
+    delta.paths = {0};
+    const glm::vec3 end(1.3f, 0.f, 1.1f);
+    // One path: a head that leaves the scene (no end point) and a bounce ending at `end`.
+    delta.newSegments.origin = {glm::vec3(0.f, 1.8f, 0.f), glm::vec3(1.3f, 1.f, 1.1f)};
+    delta.newSegments.direction = {glm::vec3(0.f, 1.f, 0.f), glm::vec3(0.f, -1.f, 0.f)};
+    delta.newSegments.length = {std::numeric_limits<float>::infinity(), 1.f};
+    delta.newSegments.power = {glm::vec3(1.f), glm::vec3(1.f)};
+    delta.newSegments.hitEntity = {Entity{}, Entity{}};
+    delta.newSegments.hitPrimitive = {0, 0};
+    delta.newSegments.bounce = {0, 1};
+    delta.oldFirst = {0, 0};
+    delta.newFirst = {0, 2};
+    room.system.update(room.world, FrameContext{1});
+    const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
+    const float r = room.system.influenceDistance();
+    // Marked: every probe within r of the end point; none farther than r plus the diagonal of
+    // the half-spacing de-duplication cell (the cell's centre stands for the end point, and
+    // the radius around it is widened by its half diagonal).
+    const float slack = std::sqrt(3.f) * 0.5f * grid.spacing;
+    std::size_t marked = 0;
+    for (std::uint32_t p = 0; p < grid.probeCount(); ++p) {
+        const float d = glm::length(grid.position(p) - end);
+        if (d <= r) {
+            EXPECT_TRUE(room.system.isStale(p)) << p;
+        }
+        if (d > r + slack + 1e-4f) {
+            EXPECT_FALSE(room.system.isStale(p)) << p;
+        }
+        marked += room.system.isStale(p);
+    }
+    EXPECT_GT(marked, 0u);
+    EXPECT_EQ(room.system.lastFrame().refreshed, 0u);
+
+    // With the default threshold the lone end point marks nothing; four in one place do.
+    MobileRoom quiet(0, 4);
+    quiet.world.ctx().emplace<PhotonDelta>(delta);
+    quiet.system.update(quiet.world, FrameContext{1});
+    EXPECT_EQ(quiet.system.staleCount(), 0u);
+    PhotonDelta& crowd = quiet.world.ctx().get<PhotonDelta>();
+    for (int k = 0; k < 3; ++k)
+        crowd.newSegments.appendFrom(delta.newSegments, 1);
+    quiet.system.update(quiet.world, FrameContext{2});
+    EXPECT_EQ(quiet.system.staleCount(), marked);
+}
+
+TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
+    MobileRoom room(0);
+    room.world.view<PointLight>().each([](PointLight& light) { light.intensity = 20.f; });
+    room.world.view<const PointLight>().each(
+        [&](Entity e, const PointLight&) { room.world.markChanged<PointLight>(e); });
+    room.system.update(room.world, FrameContext{1});
+    EXPECT_EQ(room.system.staleCount(), room.world.ctx().get<ProbeVolume>().probeCount());
+}
+
+// ---- export ----------------------------------------------------------------------------------
+
+TEST(ShProbes, AvatarExportWritesTheDocumentedCsv) {
+    TwoRooms rooms;
+    const Entity a = addAvatar(rooms.world, {-1.f, 1.f, 0.3f});
+    rooms.world.emplace<Name>(a, Name{"walker, left"});
+    const Entity b = addAvatar(rooms.world, {1.f, 1.f, 0.3f});
+    rooms.system.update(rooms.world, FrameContext{1});
+    const auto path = std::filesystem::temp_directory_path() / "qgi_test_avatar_sh.csv";
+    exportAvatarSh(rooms.world, path);
+    std::ifstream in(path);
+    std::string header;
+    std::getline(in, header);
+    EXPECT_EQ(header,
+              "avatar,x,y,z,L00_r,L00_g,L00_b,L1m1_r,L1m1_g,L1m1_b,L10_r,L10_g,L10_b,L11_r,L11_g,"
+              "L11_b,L2m2_r,L2m2_g,L2m2_b,L2m1_r,L2m1_g,L2m1_b,L20_r,L20_g,L20_b,L21_r,L21_g,"
+              "L21_b,L22_r,L22_g,L22_b");
+    std::vector<std::string> rows;
+    for (std::string line; std::getline(in, line);)
+        rows.push_back(line);
+    ASSERT_EQ(rows.size(), 2u);
+    bool sawQuoted = false;
+    for (const std::string& row : rows) {
+        std::string rest = row;
+        if (row.rfind("\"walker, left\",", 0) == 0) {
+            sawQuoted = true;
+            rest = row.substr(std::strlen("\"walker, left\","));
+        } else {
+            rest = row.substr(row.find(',') + 1);
+        }
+        std::vector<float> values;
+        std::stringstream fields(rest);
+        for (std::string f; std::getline(fields, f, ',');)
+            values.push_back(std::stof(f));
+        ASSERT_EQ(values.size(), 30u);
+        const Entity e = row[0] == '"' ? a : b;
+        const ShLighting& sh = rooms.world.get<ShLighting>(e);
+        EXPECT_FLOAT_EQ(values[0], rooms.world.get<WorldTransform>(e).matrix[3].x);
+        for (int i = 0; i < 9; ++i)
+            for (int c = 0; c < 3; ++c)
+                EXPECT_FLOAT_EQ(values[3 + 3 * i + c], sh.coefficients[i][c]);
+    }
+    EXPECT_TRUE(sawQuoted);
+    std::filesystem::remove(path);
+    EXPECT_THROW(exportAvatarSh(rooms.world, "/nonexistent-dir/x.csv"), Error);
+}
+
+} // namespace
+} // namespace qgi

@@ -1,0 +1,268 @@
+// The VLF cache file: round trip, stale and corrupt files rejected with a clear message; and
+// VlfSystem, which bakes or loads it and publishes the VlfField resource.
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/StaticMesh.h"
+#include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
+#include "runtime/ecs/Registry.h"
+#include "systems/frame/FrameSchedule.h"
+#include "systems/vlf/VlfBake.h"
+#include "systems/vlf/VlfCache.h"
+#include "systems/vlf/VlfField.h"
+#include "systems/vlf/VlfSystem.h"
+#include "test_vlf_scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <unistd.h>
+
+using namespace qgi;
+using namespace qgi::vlf;
+
+namespace {
+
+std::unique_ptr<VlfScene> glossyRoom(float lamp = 4.f) {
+    test::VlfSceneBuilder b;
+    const std::uint32_t wall = b.material(glm::vec3(0.5f));
+    const std::uint32_t light = b.material(glm::vec3(0.f), glm::vec3(lamp));
+    const std::uint32_t glossy = b.material(glm::vec3(0.3f), glm::vec3(0.f), glm::vec3(0.6f), 10.f);
+    const std::uint32_t mirror = b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(0.8f), 0.f);
+    b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true, [&](int axis, int side) {
+        if (axis == 1 && side == 0) return glossy;
+        if (axis == 0 && side == 1) return light;
+        if (axis == 2 && side == 0) return mirror;
+        return wall;
+    });
+    return b.build();
+}
+
+VlfSettings small() {
+    VlfSettings s;
+    s.directionLevel = 2;
+    s.linesPerSide = 16;
+    s.tileSize = 4;
+    s.iterations = 2;
+    return s;
+}
+
+std::filesystem::path tempFile(const char* name) {
+    return std::filesystem::temp_directory_path() /
+           (std::string("qgi_test_vlf_") + std::to_string(::getpid()) + "_" + name);
+}
+
+std::vector<char> readAll(const std::filesystem::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+void writeAll(const std::filesystem::path& p, const std::vector<char>& bytes) {
+    std::ofstream out(p, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+void expectMessage(const std::filesystem::path& p, std::uint64_t key, const char* words) {
+    try {
+        VlfCache::load(p, key);
+        ADD_FAILURE() << "no error for " << words;
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find(p.string()), std::string::npos) << e.what();
+    }
+}
+
+} // namespace
+
+TEST(VlfCache, RoundTripKeepsEveryValue) {
+    const auto scene = glossyRoom();
+    const Vlf a = bakeVlf(*scene, small());
+    const auto path = tempFile("roundtrip.vlf");
+    VlfCache::save(a, path);
+    const Vlf b = VlfCache::load(path, vlfKey(*scene, small()));
+    EXPECT_EQ(a.key(), b.key());
+    EXPECT_EQ(a.irradiance(), b.irradiance());
+    EXPECT_EQ(a.texelCoverage(), b.texelCoverage());
+    EXPECT_EQ(a.tiles(), b.tiles());
+    EXPECT_EQ(a.slots(), b.slots());
+    EXPECT_EQ(a.tileCount(), b.tileCount());
+    EXPECT_EQ(a.center(), b.center());
+    EXPECT_EQ(a.radius(), b.radius());
+    EXPECT_EQ(a.memory().renderBytes, b.memory().renderBytes);
+    // Lookups agree.
+    std::mt19937 rng(4);
+    std::uniform_real_distribution<float> u(-0.9f, 0.9f);
+    for (std::uint32_t f = 0; f < a.faces().size(); ++f)
+        for (int k = 0; k < 20; ++k) {
+            const Face& face = a.faces()[f];
+            const glm::vec3 x = face.origin + (0.5f + 0.5f * u(rng)) * face.extentU * face.axisU +
+                                (0.5f + 0.5f * u(rng)) * face.extentV * face.axisV;
+            const glm::vec3 view =
+                glm::normalize(face.normal + 0.5f * glm::vec3(u(rng), u(rng), u(rng)));
+            EXPECT_EQ(a.radiance(f, x, view), b.radiance(f, x, view));
+        }
+    std::filesystem::remove(path);
+}
+
+TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
+    const auto scene = glossyRoom();
+    const VlfSettings s = small();
+    const Vlf a = bakeVlf(*scene, s);
+    const auto path = tempFile("bad.vlf");
+    VlfCache::save(a, path);
+    const std::uint64_t key = vlfKey(*scene, s);
+    const std::vector<char> good = readAll(path);
+
+    // Stale: another scene or other settings give another key.
+    EXPECT_NE(vlfKey(*glossyRoom(5.f), s), key);
+    VlfSettings other = s;
+    other.iterations = 3;
+    EXPECT_NE(vlfKey(*scene, other), key);
+    expectMessage(path, vlfKey(*scene, other), "stale");
+
+    // A flipped byte anywhere in the payload.
+    std::mt19937 rng(9);
+    for (int k = 0; k < 20; ++k) {
+        std::vector<char> bad = good;
+        const std::size_t at = 36 + rng() % (bad.size() - 36);
+        bad[at] = char(bad[at] ^ 0x5a);
+        writeAll(path, bad);
+        expectMessage(path, key, "corrupt");
+    }
+    // Truncated, extended, wrong magic, other version, missing.
+    std::vector<char> bad(good.begin(), good.begin() + std::ptrdiff_t(good.size() / 2));
+    writeAll(path, bad);
+    expectMessage(path, key, "corrupt");
+    bad = good;
+    bad.push_back(0);
+    writeAll(path, bad);
+    expectMessage(path, key, "corrupt");
+    bad = good;
+    bad[0] = 'X';
+    writeAll(path, bad);
+    expectMessage(path, key, "not a VLF cache");
+    bad = good;
+    bad[8] = char(bad[8] + 1);
+    writeAll(path, bad);
+    expectMessage(path, key, "version");
+    writeAll(path, std::vector<char>(good.begin(), good.begin() + 10));
+    expectMessage(path, key, "corrupt");
+    std::filesystem::remove(path);
+    expectMessage(path, key, "no VLF cache");
+}
+
+TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
+    const auto scene = glossyRoom();
+    const VlfSettings s = small();
+    const auto path = tempFile("rebuild.vlf");
+    std::filesystem::remove(path);
+    bool baked = false;
+    const Vlf first = VlfCache::loadOrBake(*scene, s, path, &baked);
+    EXPECT_TRUE(baked);
+    const Vlf second = VlfCache::loadOrBake(*scene, s, path, &baked);
+    EXPECT_FALSE(baked);
+    EXPECT_EQ(first.tiles(), second.tiles());
+    std::vector<char> bytes = readAll(path);
+    bytes[bytes.size() - 5] = char(bytes[bytes.size() - 5] ^ 1);
+    writeAll(path, bytes);
+    const Vlf third = VlfCache::loadOrBake(*scene, s, path, &baked);
+    EXPECT_TRUE(baked);
+    EXPECT_EQ(first.tiles(), third.tiles());
+    EXPECT_NO_THROW(VlfCache::load(path, vlfKey(*scene, s))); // the rebuilt file is good
+    std::filesystem::remove(path);
+}
+
+// ---- VlfSystem: the registry's static meshes in, the VlfField resource out ------------------
+
+namespace {
+
+Entity addQuad(Registry& world, glm::vec3 corner, glm::vec3 u, glm::vec3 v, const Material& m,
+               bool mobile = false) {
+    Mesh mesh;
+    const glm::vec3 n = glm::normalize(glm::cross(u, v));
+    for (const glm::vec3& p : {corner, corner + u, corner + u + v, corner + v}) {
+        mesh.positions.push_back(p);
+        mesh.normals.push_back(n);
+    }
+    mesh.indices = {0, 1, 2, 0, 2, 3};
+    const Entity e = world.create();
+    world.emplace<Mesh>(e, mesh);
+    world.emplace<WorldTransform>(e);
+    world.emplace<Material>(e, m);
+    if (mobile)
+        world.emplace<MobileMesh>(e);
+    else
+        world.emplace<StaticMesh>(e);
+    return e;
+}
+
+} // namespace
+
+TEST(VlfSystem, PublishesTheFieldAndMapsSpecularFacesToEntities) {
+    Registry world;
+    Material lamp;
+    lamp.baseColor = glm::vec3(0.f);
+    lamp.emission = glm::vec3(2.f);
+    Material glossy;
+    glossy.baseColor = glm::vec3(0.3f);
+    glossy.specular = glm::vec3(0.5f);
+    glossy.phongExponent = 20.f;
+    Material metal; // glTF metallic-roughness only: read as a mirror
+    metal.metallic = 1.f;
+    metal.roughness = 0.f;
+    const Entity floor = addQuad(world, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, glossy);
+    addQuad(world, {-1, 1, -1}, {2, 0, 0}, {0, 0, 2}, lamp); // ceiling light, facing down
+    const Entity wall = addQuad(world, {-1, 0, -1}, {2, 0, 0}, {0, 1, 0}, metal);
+    addQuad(world, {-0.2f, 0.5f, 0.2f}, {0.4f, 0, 0}, {0, 0, -0.4f}, glossy,
+            true); // mobile: not baked
+
+    VlfSystemSettings settings;
+    settings.bake = small();
+    settings.cacheFile = tempFile("system.vlf");
+    std::filesystem::remove(settings.cacheFile);
+    VlfSystem(settings).build(world);
+    ASSERT_TRUE(world.ctx().contains<VlfField>());
+    const VlfField& field = world.ctx().get<VlfField>();
+    EXPECT_EQ(field.vlf.faces().size(), 3u); // the mobile quad is not part of the field
+    ASSERT_EQ(field.specularFaces.size(), 2u);
+    ASSERT_TRUE(field.specularFaces.contains(floor));
+    ASSERT_TRUE(field.specularFaces.contains(wall));
+    const vlf::Face& wallFace = field.vlf.faces()[field.specularFaces.at(wall).front()];
+    EXPECT_TRUE(wallFace.isMirror());
+    EXPECT_EQ(wallFace.specular, glm::vec3(1.f));
+    EXPECT_EQ(wallFace.diffuse, glm::vec3(0.f));
+    // The floor reflects the lamp: its glossy tiles hold light.
+    const std::uint32_t f = field.specularFaces.at(floor).front();
+    EXPECT_GT(
+        field.vlf.specularRadiance(f, {0.f, 0.f, 0.f}, glm::normalize(glm::vec3(0.2f, 1.f, 0.1f)))
+            .x,
+        0.f);
+    EXPECT_TRUE(std::filesystem::exists(settings.cacheFile));
+
+    // Through the frame schedule (no renderer): loaded from the cache this time.
+    Registry again;
+    addQuad(again, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, glossy);
+    addQuad(again, {-1, 1, -1}, {2, 0, 0}, {0, 0, 2}, lamp);
+    addQuad(again, {-1, 0, -1}, {2, 0, 0}, {0, 1, 0}, metal);
+    addQuad(again, {-0.2f, 0.5f, 0.2f}, {0.4f, 0, 0}, {0, 0, -0.4f}, glossy, true);
+    FrameSettings frame;
+    frame.photons.reset();
+    frame.render.reset();
+    frame.vlf = settings;
+    FrameSchedule schedule(again, frame);
+    ASSERT_TRUE(again.ctx().contains<VlfField>());
+    EXPECT_EQ(again.ctx().get<VlfField>().vlf.tiles(), field.vlf.tiles());
+    std::filesystem::remove(settings.cacheFile);
+}
+
+TEST(VlfSystem, EmptySceneIsAClearError) {
+    Registry world;
+    VlfSystemSettings settings;
+    settings.bake = small();
+    EXPECT_THROW(VlfSystem(settings).build(world), Error);
+    settings.bake.tileSize = 5;
+    EXPECT_THROW(VlfSystem{settings}, Error);
+}
