@@ -188,6 +188,8 @@ const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
     mVlfSource = field;
     mVlfKey = v.key();
     return &mVlf;
+}
+
 bool RenderSystem::syncPointCache(const Registry& registry) {
     const PointCache* cache = registry.ctx().find<PointCache>();
     if (!cache || cache->size() == 0 || cache->grid.pointCount() != cache->size()) return false;
