@@ -4,6 +4,7 @@
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
+#include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -29,6 +30,9 @@ float distanceToSegment(const glm::vec3& c, const glm::vec3& a, const glm::vec3&
     const float t = len2 > 0.f ? std::clamp(glm::dot(c - a, ab) / len2, 0.f, 1.f) : 0.f;
     return glm::length(a + t * ab - c);
 }
+
+// queueShadowed culls the grid's cells in blocks of this many per axis before testing cells.
+constexpr int kCullBlock = 8;
 
 float maxScale(const glm::mat4& m) {
     return std::max(
@@ -94,6 +98,7 @@ void PointCacheSystem::build(Registry& registry) {
     mPowerSum.assign(cache.size(), glm::dvec3(0.0));
     mIsTouched.assign(cache.size(), 0);
     mQueuedFlag.assign(cache.size(), 0);
+    mCandidateFlag.assign(cache.size(), 0);
     mQueueKey.assign(cache.size(), 0.f);
     mQueue.clear();
 
@@ -171,13 +176,63 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         if (std::isfinite(move.after.x) && std::isfinite(move.radiusAfter)) moves.push_back(move);
     }
     if (moves.empty() || cache.size() == 0) return;
-    // Per point: the distance to the nearest moved mobile when a moved mobile (old or new
-    // pose) may stand between it and a light; +inf otherwise. Parallel, then queued in order.
+    // Whether a segment from some x within h of q to a light passes a moved mobile (old or new
+    // pose): moving an end of a segment by h moves each of its points by at most h, so
+    // distanceToSegment(c, q, L) < R + h bounds every such x. h = 0: the point test itself.
+    const auto mayShadow = [&](const glm::vec3& q, float h) {
+        for (const Move& m : moves)
+            for (const AreaLight& light : mLights)
+                if (distanceToSegment(m.before, q, light.centre) <
+                        m.radiusBefore + light.boundRadius + h ||
+                    distanceToSegment(m.after, q, light.centre) <
+                        m.radiusAfter + light.boundRadius + h)
+                    return true;
+        return false;
+    };
+    // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
+    // cells, each tested by its bounding sphere; then the points listed in passing cells (a
+    // point is listed in the cell holding its position, among others).
+    const PointGrid& grid = cache.grid;
+    const glm::ivec3 dims = grid.dims();
+    const float cell = grid.cellSize();
+    const glm::ivec3 blocks = (dims + kCullBlock - 1) / kCullBlock;
+    const std::size_t blockCount = std::size_t(blocks.x) * blocks.y * blocks.z;
+    std::vector<std::vector<std::uint32_t>> passing(blockCount);
+    tbb::parallel_for(std::size_t(0), blockCount, [&](std::size_t b) {
+        const glm::ivec3 bi(int(b % blocks.x), int(b / blocks.x % blocks.y),
+                            int(b / (std::size_t(blocks.x) * blocks.y)));
+        const glm::ivec3 lo = bi * kCullBlock, hi = glm::min(lo + kCullBlock, dims);
+        const glm::vec3 size = glm::vec3(hi - lo) * cell;
+        const glm::vec3 corner = grid.origin() + glm::vec3(lo) * cell;
+        if (!mayShadow(corner + 0.5f * size, 0.5f * glm::length(size))) return;
+        const float h = 0.5f * std::sqrt(3.f) * cell;
+        for (int k = lo.z; k < hi.z; ++k)
+            for (int j = lo.y; j < hi.y; ++j)
+                for (int i = lo.x; i < hi.x; ++i) {
+                    const std::uint32_t c = std::uint32_t((k * dims.y + j) * dims.x + i);
+                    if (grid.cellStart()[c] == grid.cellStart()[c + 1]) continue;
+                    const glm::vec3 centre = grid.origin() + (glm::vec3(i, j, k) + 0.5f) * cell;
+                    if (mayShadow(centre, h)) passing[b].push_back(c);
+                }
+    });
+    mCandidates.clear();
+    for (const auto& cells : passing)
+        for (const std::uint32_t c : cells)
+            for (std::uint32_t e = grid.cellStart()[c]; e < grid.cellStart()[c + 1]; ++e) {
+                const std::uint32_t p = grid.cellPoints()[e];
+                if (mCandidateFlag[p]) continue;
+                mCandidateFlag[p] = 1;
+                mCandidates.push_back(p);
+            }
+    mStats.shadowCandidates = mCandidates.size();
+    // Per candidate: the distance to the nearest moved mobile when a moved mobile (old or new
+    // pose) may stand between it and a light; +inf otherwise.
     std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
     tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, cache.size(), 256),
+        tbb::blocked_range<std::size_t>(0, mCandidates.size(), 256),
         [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t p = range.begin(); p != range.end(); ++p) {
+            for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                const std::uint32_t p = mCandidates[i];
                 const glm::vec3 x = cache.position[p], n = cache.normal[p];
                 for (const Move& m : moves)
                     for (const AreaLight& light : mLights) {
@@ -195,6 +250,8 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
                     }
             }
         });
+    for (const std::uint32_t p : mCandidates)
+        mCandidateFlag[p] = 0;
     for (std::size_t p = 0; p < cache.size(); ++p) {
         if (!std::isfinite(key[p])) continue;
         if (!mQueuedFlag[p]) {
@@ -215,11 +272,13 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
     RayScene* scene = registry.ctx().find<RayScene>();
     if (!cache || !scene || cache->size() == 0) return;
 
+    FrameProfiler* profiler = registry.ctx().find<FrameProfiler>();
     // ---- indirect: DETP on the points' discs --------------------------------------------------
     const PhotonStore* store = registry.ctx().find<PhotonStore>();
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
     mTouched.clear();
     if (store) {
+        const StageTimer timer(profiler, "indirect", mStats.indirectMs);
         const bool full = mNeedsFull || (delta && delta->full);
         if (full) {
             mStats.fullIndirect = true;
@@ -256,8 +315,12 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
     }
 
     // ---- soft shadows around moved mobiles, within the budget ---------------------------------
-    queueShadowed(registry, *cache);
+    {
+        const StageTimer timer(profiler, "queue", mStats.queueMs);
+        queueShadowed(registry, *cache);
+    }
     if (!mQueue.empty()) {
+        const StageTimer timer(profiler, "refresh", mStats.refreshMs);
         const std::size_t take = std::min<std::size_t>(mQueue.size(), cache->settings.updateBudget);
         const auto nearer = [&](std::uint32_t a, std::uint32_t b) {
             return mQueueKey[a] < mQueueKey[b] || (mQueueKey[a] == mQueueKey[b] && a < b);

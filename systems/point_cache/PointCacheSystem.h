@@ -56,9 +56,14 @@ public:
         bool fullIndirect = false;       ///< every point's indirect re-estimated
         std::size_t deltaSegments = 0;   ///< delta segments traced against the point discs
         std::size_t indirectWritten = 0; ///< points whose indirect value changed
+        std::size_t shadowCandidates = 0; ///< points tested against the moved mobiles
         std::size_t queued = 0;          ///< points newly queued for soft-shadow refresh
         std::size_t refreshed = 0;       ///< points re-shaded this frame (<= updateBudget)
         std::size_t pending = 0;         ///< queued points left for later frames
+        // Wall-clock milliseconds of the stages (also nested under point.cache in the profile).
+        double indirectMs = 0; ///< the photon delta through the points' discs
+        double queueMs = 0;    ///< finding the points a moved mobile may shadow
+        double refreshMs = 0;  ///< re-shading the budget's worth of them
     };
 
     /// Throws qgi::Error for settings out of range.
@@ -104,6 +109,8 @@ private:
     std::unordered_map<Entity, MobileBound> mMobiles;
 
     std::vector<std::uint8_t> mQueuedFlag; ///< per point
+    std::vector<std::uint32_t> mCandidates;   ///< frame scratch: points tested in queueShadowed
+    std::vector<std::uint8_t> mCandidateFlag; ///< per point, all 0 between frames
     std::vector<float> mQueueKey;          ///< per point: distance to the mobile when queued
     std::vector<std::uint32_t> mQueue;
 

@@ -114,7 +114,8 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
         w.cache->update(w.registry, FrameContext{w.frame++, 0.0, 0.f, 0});
         w.registry.clearChanges();
     }
-    double segments = 0, queued = 0, refreshed = 0;
+    double segments = 0, queued = 0, refreshed = 0, candidates = 0, indirectMs = 0, queueMs = 0,
+           refreshMs = 0;
     for (auto _ : state) {
         state.PauseTiming();
         const float x = 0.05f * float(w.frame % 40 < 20 ? w.frame % 20 : 20 - w.frame % 20);
@@ -130,12 +131,20 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
         segments += double(s.deltaSegments);
         queued += double(s.queued);
         refreshed += double(s.refreshed);
+        candidates += double(s.shadowCandidates);
+        indirectMs += s.indirectMs;
+        queueMs += s.queueMs;
+        refreshMs += s.refreshMs;
         state.ResumeTiming();
     }
     const double n = double(state.iterations());
     state.counters["deltaSegments"] = segments / n;
     state.counters["queued"] = queued / n;
     state.counters["refreshed"] = refreshed / n;
+    state.counters["shadowCandidates"] = candidates / n;
+    state.counters["indirect_ms"] = indirectMs / n;
+    state.counters["queue_ms"] = queueMs / n;
+    state.counters["refresh_ms"] = refreshMs / n;
 }
 BENCHMARK(BM_UpdateMovingMobile)->Unit(benchmark::kMillisecond)->Iterations(40);
 

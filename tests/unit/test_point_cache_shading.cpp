@@ -353,6 +353,32 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     system.update(scene.registry, FrameContext{2});
     scene.registry.clearChanges();
     const auto stats = system.lastFrame();
+    // The queue is exactly what testing every point would give (the system culls by blocks and
+    // cells of its grid first): the points with a light above their horizon whose segment to
+    // it passes within (blocker's bounding sphere + light's) of the blocker, old or new pose.
+    {
+        Aabb box;
+        for (const glm::vec3& v : scene.registry.get<Mesh>(scene.blocker).positions)
+            box.extend(v);
+        const float radius = 0.5f * glm::length(box.extent());
+        std::size_t expected = 0;
+        for (std::size_t p = 0; p < cache.size(); ++p) {
+            const glm::vec3 x = cache.position[p];
+            bool hit = false;
+            for (const AreaLight& l : system.areaLights()) {
+                if (glm::dot(cache.normal[p], l.centre - x) < -l.boundRadius) continue;
+                for (const glm::vec3 at : {blockerOld, blockerOld + offset}) {
+                    const glm::vec3 c = at + box.center(), ab = l.centre - x;
+                    const float t = std::clamp(glm::dot(c - x, ab) / glm::dot(ab, ab), 0.f, 1.f);
+                    hit = hit || glm::length(x + t * ab - c) < radius + l.boundRadius;
+                }
+            }
+            expected += hit ? 1 : 0;
+        }
+        EXPECT_EQ(stats.queued, expected);
+        EXPECT_LT(stats.shadowCandidates, cache.size()); // the culling culled something
+        EXPECT_GE(stats.shadowCandidates, stats.queued);
+    }
     ASSERT_GT(stats.queued, settings.updateBudget);
     EXPECT_EQ(stats.refreshed, settings.updateBudget);
     EXPECT_EQ(stats.pending, stats.queued - settings.updateBudget);
