@@ -26,6 +26,12 @@ constexpr std::uint64_t mixBits(std::uint64_t z) {
     return z ^ (z >> 31);
 }
 
+/// Uniform number in [0, 1) drawn from a 64-bit key: the top 24 bits of mixBits(key), so
+/// distinct keys give independent-looking values and every value is an exact float.
+inline float keyUniform(std::uint64_t key) {
+    return float(mixBits(key) >> 40) * 0x1p-24f;
+}
+
 /// Counter-based uniform number in [0, 1) for one decision of one photon: the key packs
 /// (photon, bounce, dimension) without collisions and mixBits is a bijection, so distinct
 /// decisions never share a value for a given seed. `seedKey` is mixBits(seed).
@@ -33,7 +39,7 @@ inline float hashUniform(std::uint64_t seedKey, std::uint32_t photon, std::uint3
                          std::uint32_t dimension) {
     const std::uint64_t key = (std::uint64_t(photon) << 32) |
                               (std::uint64_t(bounce & 0xffffu) << 16) | (dimension & 0xffffu);
-    return float(mixBits(key ^ seedKey) >> 40) * 0x1p-24f;
+    return keyUniform(key ^ seedKey);
 }
 
 /// Radical inverse of `index` in `Base` (a template, so the divisions become multiplications).

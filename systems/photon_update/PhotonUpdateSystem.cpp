@@ -8,6 +8,7 @@
 #include "runtime/core/Log.h"
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 
@@ -60,26 +61,6 @@ Aabb transformBox(const Aabb& box, const glm::mat4& m) {
 Aabb widened(const Aabb& box) {
     const glm::vec3 pad = 1e-4f * (glm::abs(box.min) + glm::abs(box.max) + box.extent()) + 1e-6f;
     return {box.min - pad, box.max + pad};
-}
-
-/// Whether origin + t * direction meets the box for some t in [0, length] (slab test).
-bool segmentMeetsBox(const glm::vec3& origin, const glm::vec3& direction, float length,
-                     const Aabb& box) {
-    float near = 0.f, far = length;
-    for (int axis = 0; axis < 3; ++axis) {
-        if (direction[axis] == 0.f) {
-            if (origin[axis] < box.min[axis] || origin[axis] > box.max[axis]) return false;
-            continue;
-        }
-        const float inverse = 1.f / direction[axis];
-        float t0 = (box.min[axis] - origin[axis]) * inverse;
-        float t1 = (box.max[axis] - origin[axis]) * inverse;
-        if (t0 > t1) std::swap(t0, t1);
-        near = std::max(near, t0);
-        far = std::min(far, t1);
-        if (near > far) return false;
-    }
-    return true;
 }
 
 /// Photon counts in proportion to each light's power (the sum of its RGB watts), summing to

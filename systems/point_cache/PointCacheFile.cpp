@@ -6,6 +6,8 @@
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Finite.h"
+#include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
 #include "systems/photon_update/PhotonEmitter.h"
 #include "systems/photon_update/PhotonSettings.h"
@@ -25,26 +27,6 @@ namespace {
 
 constexpr char kMagic[8] = {'Q', 'G', 'I', 'P', 'C', 'A', 'C', 'H'};
 constexpr std::uint32_t kEndian = 0x01020304u;
-
-class Fnv {
-public:
-    void bytes(const void* data, std::size_t size) {
-        const auto* p = static_cast<const unsigned char*>(data);
-        for (std::size_t i = 0; i < size; ++i) {
-            mHash ^= p[i];
-            mHash *= 0x100000001b3ull;
-        }
-    }
-    template <typename T> void value(const T& v) { bytes(&v, sizeof v); }
-    template <typename T> void array(const std::vector<T>& v) {
-        value(std::uint64_t(v.size()));
-        if (!v.empty()) bytes(v.data(), v.size() * sizeof(T));
-    }
-    std::uint64_t get() const { return mHash; }
-
-private:
-    std::uint64_t mHash = 0xcbf29ce484222325ull;
-};
 
 void put(std::vector<char>& out, const void* data, std::size_t size) {
     const char* p = static_cast<const char*>(data);
@@ -87,41 +69,41 @@ private:
 } // namespace
 
 std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& s) {
-    Fnv h;
-    h.value(kPointCacheFileVersion);
+    Fnv1aHasher h;
+    h.add(kPointCacheFileVersion);
     for (const auto v :
          {s.seed, std::uint64_t(s.particleCount), std::uint64_t(s.particleBounces),
           std::uint64_t(s.stopAfterRejections), s.maxDarts, std::uint64_t(s.maxPoints),
           std::uint64_t(s.aoRays), std::uint64_t(s.trivialTests), std::uint64_t(s.shadowSamples)})
-        h.value(v);
+        h.add(v);
     for (const float v : {s.rMin, s.rMax, s.aoDistance})
-        h.value(v);
+        h.add(v);
     const auto mesh = [&](Entity, const Mesh& m, const WorldTransform& world, bool mobile) {
-        h.value(std::uint8_t(mobile));
-        h.value(world.matrix);
-        h.array(m.positions);
-        h.array(m.indices);
+        h.add(std::uint8_t(mobile));
+        h.add(world.matrix);
+        h.addArray(m.positions);
+        h.addArray(m.indices);
     };
     registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const StaticMesh&, const Mesh& m, const WorldTransform& w) {
             mesh(e, m, w, false);
-            if (const Material* mat = registry.tryGet<Material>(e)) h.value(mat->emission);
+            if (const Material* mat = registry.tryGet<Material>(e)) h.add(mat->emission);
         });
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const MobileMesh&, const Mesh& m, const WorldTransform& w) {
             mesh(e, m, w, true);
-            if (const Material* mat = registry.tryGet<Material>(e)) h.value(mat->emission);
+            if (const Material* mat = registry.tryGet<Material>(e)) h.add(mat->emission);
         });
     std::vector<PhotonEmitter> lights;
     findEmitterSources(registry, PhotonSettings{}, lights);
     for (const PhotonEmitter& l : lights) {
-        h.value(l.kind);
-        h.value(l.world);
-        h.value(l.radiant);
-        h.value(l.innerAngle);
-        h.value(l.outerAngle);
+        h.add(l.kind);
+        h.add(l.world);
+        h.add(l.radiant);
+        h.add(l.innerAngle);
+        h.add(l.outerAngle);
     }
-    return h.get();
+    return h.value();
 }
 
 void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& c) {
@@ -143,9 +125,9 @@ void writePointCacheFile(const std::string& path, std::uint64_t key, const Point
     putArray(out, c.visibility);
     const std::uint64_t total = out.size() + sizeof(std::uint64_t);
     std::memcpy(out.data() + totalAt, &total, sizeof total);
-    Fnv sum;
-    sum.bytes(out.data(), out.size());
-    putValue(out, sum.get());
+    Fnv1aHasher sum;
+    sum.addBytes(out.data(), out.size());
+    putValue(out, sum.value());
 
     const std::string temp = path + ".tmp";
     {
@@ -186,9 +168,9 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
              " bytes, its header says ", total, ")");
     std::uint64_t stored = 0;
     std::memcpy(&stored, data.data() + body, sizeof stored);
-    Fnv sum;
-    sum.bytes(data.data(), body);
-    if (sum.get() != stored) fail("point cache file '", path, "' is corrupt (checksum mismatch)");
+    Fnv1aHasher sum;
+    sum.addBytes(data.data(), body);
+    if (sum.value() != stored) fail("point cache file '", path, "' is corrupt (checksum mismatch)");
 
     const auto points = in.value<std::uint64_t>();
     const auto lights = in.value<std::uint32_t>();
@@ -205,11 +187,9 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     in.array(read.direct, points);
     in.array(read.visibility, points * lights);
     for (std::size_t p = 0; p < points; ++p) {
-        const auto finite = [](const glm::vec3& v) {
-            return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-        };
         const float nl = glm::length(read.normal[p]);
-        if (!finite(read.position[p]) || !finite(read.direct[p]) || !(std::abs(nl - 1.f) < 1e-3f) ||
+        if (!isFinite(read.position[p]) || !isFinite(read.direct[p]) ||
+            !(std::abs(nl - 1.f) < 1e-3f) ||
             !(read.radius[p] > 0.f && std::isfinite(read.radius[p])) ||
             !(read.ao[p] >= 0.f && read.ao[p] <= 1.f))
             fail("point cache file '", path, "': point ", p, " holds values out of range");

@@ -89,7 +89,7 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
     float sum = 0.f, sumEnabled = 0.f;
     for (int c = 0; c < 8; ++c) {
         const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-        probes[c] = mGrid.probeIndex(cellCoords + glm::ivec3(dx, dy, dz));
+        probes[c] = mGrid.cornerProbe(cellCoords, c);
         const float w = (dx ? t.x : 1.f - t.x) * (dy ? t.y : 1.f - t.y) * (dz ? t.z : 1.f - t.z);
         trilinear[c] = mEnabled[probes[c]] ? w : 0.f;
         weights[c] = trilinear[c] * visibility[c];

@@ -42,6 +42,10 @@ struct ProbeGrid {
     glm::vec3 position(std::uint32_t index) const {
         return origin + spacing * glm::vec3(probeCoords(index));
     }
+    /// Probe at corner `corner` (0 to 7; bit 0: +x, bit 1: +y, bit 2: +z) of cell `cell`.
+    std::uint32_t cornerProbe(const glm::ivec3& cell, int corner) const {
+        return probeIndex(cell + glm::ivec3(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1));
+    }
     std::uint32_t cellIndex(const glm::ivec3& c) const {
         const glm::ivec3 n = cellCounts();
         return std::uint32_t(c.x + n.x * (c.y + n.y * c.z));

@@ -17,6 +17,7 @@
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneQueries.h"
+#include "systems/photon_update/PhotonSampling.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/common.hpp>
@@ -34,23 +35,12 @@
 namespace qgi {
 namespace {
 
-std::uint64_t mix64(std::uint64_t x) {
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ull;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebull;
-    x ^= x >> 31;
-    return x;
-}
-
-float uniform(std::uint64_t key) {
-    return float(mix64(key) >> 40) * 0x1p-24f; // [0, 1)
-}
-
 /// A uniformly distributed rotation drawn from (seed, probe) (Shoemake's quaternion method).
 glm::mat3 probeRotation(std::uint64_t seed, std::uint32_t probe) {
-    const std::uint64_t key = mix64(seed ^ 0x5348'5072'6f62'6573ull) + std::uint64_t(probe) * 3;
-    const float u1 = uniform(key), u2 = uniform(key + 1), u3 = uniform(key + 2);
+    const std::uint64_t key =
+        photon::mixBits(seed ^ 0x5348'5072'6f62'6573ull) + std::uint64_t(probe) * 3;
+    const float u1 = photon::keyUniform(key), u2 = photon::keyUniform(key + 1),
+                u3 = photon::keyUniform(key + 2);
     const float a = std::sqrt(1.f - u1), b = std::sqrt(u1);
     const float t2 = glm::two_pi<float>() * u2, t3 = glm::two_pi<float>() * u3;
     const glm::quat q(b * std::cos(t3), a * std::sin(t2), a * std::cos(t2), b * std::sin(t3));
@@ -268,8 +258,8 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
         std::vector<glm::vec3> contribution;
         std::vector<glm::vec3> candidate(mLights.size());
         std::vector<Ray> candidateRay(mLights.size());
-        const std::uint64_t key =
-            mix64(mSettings.seed ^ 0x4c69'6768'7450'6963ull) ^ (std::uint64_t(probe) << 32);
+        const std::uint64_t key = photon::mixBits(mSettings.seed ^ 0x4c69'6768'7450'6963ull) ^
+                                  (std::uint64_t(probe) << 32);
         for (std::uint32_t k = 0; k < n; ++k) {
             if (!hits[k] || diffuse[k] == glm::vec3(0.f)) continue;
             const Hit& hit = *hits[k];
@@ -290,7 +280,7 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
                 total += candidate[j].r + candidate[j].g + candidate[j].b;
             }
             if (!(total > 0.f)) continue;
-            float pick = uniform(key + k) * total;
+            float pick = photon::keyUniform(key + k) * total;
             std::size_t chosen = mLights.size();
             for (std::size_t j = 0; j < mLights.size(); ++j) {
                 const float w = candidate[j].r + candidate[j].g + candidate[j].b;
@@ -367,25 +357,9 @@ void ShProbeSystem::markAllStale() {
 // ---- following the scene ---------------------------------------------------------------------
 
 void ShProbeSystem::markNear(const glm::vec3& point, float radius) {
-    const ProbeGrid& grid = mVolume->grid();
-    const glm::vec3 lo = (point - radius - grid.origin) / grid.spacing;
-    const glm::vec3 hi = (point + radius - grid.origin) / grid.spacing;
-    glm::ivec3 a, b;
-    for (int k = 0; k < 3; ++k) {
-        a[k] = std::max(0, int(std::ceil(lo[k])));
-        b[k] = std::min(grid.counts[k] - 1, int(std::floor(hi[k])));
-    }
-    const float r2 = radius * radius;
-    for (int z = a.z; z <= b.z; ++z)
-        for (int y = a.y; y <= b.y; ++y)
-            for (int x = a.x; x <= b.x; ++x) {
-                const std::uint32_t p = grid.probeIndex({x, y, z});
-                const glm::vec3 d = grid.position(p) - point;
-                if (glm::dot(d, d) > r2 || mStale[p]) continue;
-                mStale[p] = 1;
-                ++mStaleCount;
-                ++mStats.markedStale;
-            }
+    // A one-point box: the clamp in markNearBox returns the point itself, so the distances and
+    // the probes marked are exactly those of the point.
+    markNearBox(Aabb{point, point}, radius);
 }
 
 void ShProbeSystem::markNearBox(const Aabb& box, float radius) {
@@ -412,24 +386,6 @@ void ShProbeSystem::markNearBox(const Aabb& box, float radius) {
             }
 }
 
-static bool segmentHitsBox(const glm::vec3& origin, const glm::vec3& direction, float length,
-                           const Aabb& box) {
-    float t0 = 0.f, t1 = length;
-    for (int a = 0; a < 3; ++a) {
-        if (direction[a] == 0.f) {
-            if (origin[a] < box.min[a] || origin[a] > box.max[a]) return false;
-            continue;
-        }
-        const float inverse = 1.f / direction[a];
-        float near = (box.min[a] - origin[a]) * inverse, far = (box.max[a] - origin[a]) * inverse;
-        if (near > far) std::swap(near, far);
-        t0 = std::max(t0, near);
-        t1 = std::min(t1, far);
-        if (t0 > t1) return false;
-    }
-    return true;
-}
-
 void ShProbeSystem::markShadowed(const Aabb& box) {
     // Photon mode: a probe's own direct light changes where its shadow ray to a light crosses
     // the mobile's bounds.
@@ -444,7 +400,7 @@ void ShProbeSystem::markShadowed(const Aabb& box) {
             glm::vec3 toward, e0;
             float distance = 0.f;
             if (!lightAt(light, x, toward, distance, e0)) continue;
-            if (!segmentHitsBox(x, toward, std::min(distance, 1e30f), widened)) continue;
+            if (!segmentMeetsBox(x, toward, std::min(distance, 1e30f), widened)) continue;
             mStale[p] = 1;
             ++mStaleCount;
             ++mStats.markedStale;
@@ -610,8 +566,7 @@ void ShProbeSystem::computeVisibility(std::uint32_t cell, ProbeVolume& volume) c
     const glm::ivec3 base = grid.cellCoords(cell);
     glm::vec3 corners[8];
     for (int c = 0; c < 8; ++c)
-        corners[c] =
-            grid.position(grid.probeIndex(base + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1)));
+        corners[c] = grid.position(grid.cornerProbe(base, c));
     const int side = int(volume.visibilitySubdivisions()) + 1;
     std::vector<Ray> rays;
     std::vector<std::uint32_t> slot; // point * 8 + corner

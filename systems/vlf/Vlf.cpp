@@ -1,7 +1,7 @@
 #include "systems/vlf/Vlf.h"
 
 #include "runtime/core/Error.h"
-#include "systems/vlf/VlfHash.h"
+#include "runtime/core/Hash.h"
 
 #include <glm/geometric.hpp>
 
@@ -45,7 +45,7 @@ bool inside(const std::array<glm::vec2, 3>& t, const glm::vec2& p) {
 } // namespace
 
 std::uint64_t vlfKey(const VlfScene& scene, const VlfSettings& s) {
-    Hasher h;
+    Fnv1aHasher h;
     h.add(scene.contentHash());
     h.add(s.directionLevel);
     h.add(s.linesPerSide);

@@ -1,8 +1,8 @@
 #include "systems/vlf/VlfBake.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
-#include "systems/vlf/VlfHash.h"
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
@@ -31,7 +31,7 @@ double since(Clock::time_point t0) {
 }
 
 std::uint32_t seedFor(std::uint64_t seed, std::uint64_t a, std::uint64_t b) {
-    Hasher h;
+    Fnv1aHasher h;
     h.add(seed);
     h.add(a);
     h.add(b);

@@ -1,9 +1,9 @@
 #include "systems/vlf/VlfCache.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
 #include "systems/vlf/VlfBake.h"
-#include "systems/vlf/VlfHash.h"
 
 #include <cstring>
 #include <fstream>
@@ -95,7 +95,7 @@ void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
     w.put(std::uint64_t(v.mTileCount));
     w.putVector(v.mTiles);
 
-    Hasher h;
+    Fnv1aHasher h;
     h.addBytes(w.bytes.data(), w.bytes.size());
     const std::filesystem::path tmp = path.string() + ".tmp";
     {
@@ -141,7 +141,7 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
     std::vector<char> bytes(size);
     in.read(bytes.data(), std::streamsize(size));
     if (!in) fail(name, ": VLF cache is corrupt (payload truncated)");
-    Hasher h;
+    Fnv1aHasher h;
     h.addBytes(bytes.data(), bytes.size());
     if (h.value() != hash) fail(name, ": VLF cache is corrupt (payload hash does not match)");
 

@@ -9,9 +9,9 @@
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
 #include "systems/vlf/DirectionSet.h"
-#include "systems/vlf/VlfHash.h"
 
 #include <glm/geometric.hpp>
 
@@ -187,7 +187,7 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
         mBounds.extend(t.p1);
         mBounds.extend(t.p2);
     }
-    Hasher h;
+    Fnv1aHasher h;
     for (const Triangle& t : mTriangles)
         h.add(t);
     for (const Face& f : mFaces) {

@@ -12,6 +12,7 @@
 #include "systems/render/RenderSystem.h"
 #include "systems/vlf/VlfField.h"
 #include "systems/vlf/VlfSystem.h"
+#include "tests/unit/test_meshes.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
@@ -23,16 +24,7 @@ namespace {
 
 constexpr int kSize = 96;
 
-Mesh quad(glm::vec3 corner, glm::vec3 u, glm::vec3 v) {
-    Mesh mesh;
-    const glm::vec3 n = glm::normalize(glm::cross(u, v));
-    for (const glm::vec3& p : {corner, corner + u, corner + u + v, corner + v}) {
-        mesh.positions.push_back(p);
-        mesh.normals.push_back(n);
-    }
-    mesh.indices = {0, 1, 2, 0, 2, 3};
-    return mesh;
-}
+using test::quadMesh;
 
 Entity addQuad(Registry& world, const Mesh& mesh, const Material& material) {
     const Entity e = world.create();
@@ -66,12 +58,12 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
         mirror.specular = glm::vec3(0.8f, 0.7f, 0.6f);
         mirror.phongExponent = 0.f;
         // Room [-1,1] x [0,2] x [-1,1], faces inwards; walls of different radiance.
-        addQuad(world, quad({-1, 0, 1}, {2, 0, 0}, {0, 0, -2}), mirror);        // floor, +y
-        addQuad(world, quad({-1, 2, -1}, {2, 0, 0}, {0, 0, 2}), emitter(0.5f)); // ceiling
-        addQuad(world, quad({-1, 0, -1}, {2, 0, 0}, {0, 2, 0}), emitter(1.f));  // back, +z
-        addQuad(world, quad({1, 0, 1}, {-2, 0, 0}, {0, 2, 0}), emitter(1.5f));  // front, -z
-        addQuad(world, quad({-1, 0, 1}, {0, 0, -2}, {0, 2, 0}), emitter(2.f));  // left, +x
-        addQuad(world, quad({1, 0, -1}, {0, 0, 2}, {0, 2, 0}), emitter(3.f));   // right, -x
+        addQuad(world, quadMesh({-1, 0, 1}, {2, 0, 0}, {0, 0, -2}), mirror);        // floor, +y
+        addQuad(world, quadMesh({-1, 2, -1}, {2, 0, 0}, {0, 0, 2}), emitter(0.5f)); // ceiling
+        addQuad(world, quadMesh({-1, 0, -1}, {2, 0, 0}, {0, 2, 0}), emitter(1.f));  // back, +z
+        addQuad(world, quadMesh({1, 0, 1}, {-2, 0, 0}, {0, 2, 0}), emitter(1.5f));  // front, -z
+        addQuad(world, quadMesh({-1, 0, 1}, {0, 0, -2}, {0, 2, 0}), emitter(2.f));  // left, +x
+        addQuad(world, quadMesh({1, 0, -1}, {0, 0, 2}, {0, 2, 0}), emitter(3.f));   // right, -x
         const glm::vec3 eye(0.2f, 1.6f, 0.5f);
         const Entity cam = world.create();
         world.emplace<Camera>(cam, Camera{1.2f, 0.05f, 20.f, true});

@@ -28,6 +28,19 @@ inline Mesh gridMesh(glm::vec3 origin, glm::vec3 u, glm::vec3 v, int n) {
     return mesh;
 }
 
+/// One parallelogram: corners origin, origin + u, origin + u + v, origin + v (two triangles),
+/// facing cross(u, v).
+inline Mesh quadMesh(glm::vec3 origin, glm::vec3 u, glm::vec3 v) {
+    Mesh mesh;
+    const glm::vec3 normal = glm::normalize(glm::cross(u, v));
+    for (const glm::vec3& p : {origin, origin + u, origin + u + v, origin + v}) {
+        mesh.positions.push_back(p);
+        mesh.normals.push_back(normal);
+    }
+    mesh.indices = {0, 1, 2, 0, 2, 3};
+    return mesh;
+}
+
 /// Axis-aligned box centred on the origin: 12 triangles facing outwards, or inwards (a room).
 /// `openTop` leaves out the +y face.
 inline Mesh boxMesh(const glm::vec3& half, bool inward = false, bool openTop = false) {

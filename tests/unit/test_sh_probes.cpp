@@ -26,6 +26,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 namespace qgi {
 namespace {
@@ -64,6 +65,21 @@ double shNorm(const sh::ShRgb& a) {
     for (const glm::vec3& c : a)
         s += double(glm::dot(c, c));
     return std::sqrt(s);
+}
+
+/// Euclidean distance between two sets of coefficients (all nine, all three channels).
+double shDistance(const sh::ShRgb& a, const sh::ShRgb& b) {
+    double s = 0.0;
+    for (int i = 0; i < 9; ++i)
+        s += double(glm::dot(a[i] - b[i], a[i] - b[i]));
+    return std::sqrt(s);
+}
+
+/// The volume's interpolated coefficients at p, which must be inside the grid.
+sh::ShRgb interpolated(const ProbeVolume& volume, const glm::vec3& p) {
+    sh::ShRgb L;
+    EXPECT_TRUE(volume.interpolate(p, L));
+    return L;
 }
 
 // ---- settings ------------------------------------------------------------------------------
@@ -472,8 +488,7 @@ TEST(ShProbes, AvatarInTheDarkRoomStaysDark) {
     volume.grid().locate(nearWall, cell, t);
     double litCorners = 0.0;
     for (int c = 0; c < 8; ++c)
-        litCorners += shNorm(volume.coefficients(
-            volume.grid().probeIndex(cell + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1))));
+        litCorners += shNorm(volume.coefficients(volume.grid().cornerProbe(cell, c)));
     EXPECT_GT(litCorners, 0.0);
 }
 
@@ -491,43 +506,23 @@ TEST(ShProbes, InterpolationIsContinuousAcrossCells) {
     for (int i = 0; i <= 30; ++i)
         addAvatar(rooms.world, {-1.1f, 0.8f, -0.95f + 0.06f * float(i)});
     rooms.system.update(rooms.world, FrameContext{1});
-    const auto at = [&](const glm::vec3& p) {
-        sh::ShRgb L;
-        EXPECT_TRUE(volume.interpolate(p, L));
-        return L;
-    };
-    const auto distance = [](const sh::ShRgb& a, const sh::ShRgb& b) {
-        double s = 0.0;
-        for (int i = 0; i < 9; ++i)
-            s += double(glm::dot(a[i] - b[i], a[i] - b[i]));
-        return std::sqrt(s);
-    };
+    const auto at = [&](const glm::vec3& p) { return interpolated(volume, p); };
     const float eps = 1e-5f;
+    // The walk's centre line and, per axis, the cell faces it crosses along that axis.
+    const glm::vec3 centre(-1.1f, 0.8f, 0.1f);
+    const std::vector<float> crossed[3] = {
+        {-1.75f, -1.25f, -0.75f}, {0.75f, 1.25f}, {-0.25f, 0.25f}};
     int faces = 0;
-    for (const float face : {-1.75f, -1.25f, -0.75f}) { // x faces
-        const glm::vec3 p(face, 0.8f, 0.1f);
-        const double jump = distance(at(p - glm::vec3(eps, 0, 0)), at(p + glm::vec3(eps, 0, 0)));
-        const double change =
-            distance(at(p - glm::vec3(0.25f, 0, 0)), at(p + glm::vec3(0.25f, 0, 0)));
-        EXPECT_LT(jump, 1e-3 * change) << "x face " << face;
-        ++faces;
-    }
-    for (const float face : {0.75f, 1.25f}) { // y faces
-        const glm::vec3 p(-1.1f, face, 0.1f);
-        const double jump = distance(at(p - glm::vec3(0, eps, 0)), at(p + glm::vec3(0, eps, 0)));
-        const double change =
-            distance(at(p - glm::vec3(0, 0.25f, 0)), at(p + glm::vec3(0, 0.25f, 0)));
-        EXPECT_LT(jump, 1e-3 * change) << "y face " << face;
-        ++faces;
-    }
-    for (const float face : {-0.25f, 0.25f}) { // z faces
-        const glm::vec3 p(-1.1f, 0.8f, face);
-        const double jump = distance(at(p - glm::vec3(0, 0, eps)), at(p + glm::vec3(0, 0, eps)));
-        const double change =
-            distance(at(p - glm::vec3(0, 0, 0.25f)), at(p + glm::vec3(0, 0, 0.25f)));
-        EXPECT_LT(jump, 1e-3 * change) << "z face " << face;
-        ++faces;
-    }
+    for (int axis = 0; axis < 3; ++axis)
+        for (const float face : crossed[axis]) {
+            glm::vec3 p = centre, step(0.f);
+            p[axis] = face;
+            step[axis] = 1.f;
+            const double jump = shDistance(at(p - eps * step), at(p + eps * step));
+            const double change = shDistance(at(p - 0.25f * step), at(p + 0.25f * step));
+            EXPECT_LT(jump, 1e-3 * change) << "xyz"[axis] << " face " << face;
+            ++faces;
+        }
     EXPECT_EQ(faces, 7);
 }
 
@@ -540,17 +535,7 @@ TEST(ShProbes, InterpolationIsContinuousWhereVisibilityIsPartial) {
     for (int i = 0; i <= 40; ++i)
         addAvatar(scene.world, {-1.f + 0.05f * float(i), 0.5f, 0.55f});
     scene.system.update(scene.world, FrameContext{1});
-    const auto at = [&](const glm::vec3& p) {
-        sh::ShRgb L;
-        EXPECT_TRUE(volume.interpolate(p, L));
-        return L;
-    };
-    const auto distance = [](const sh::ShRgb& a, const sh::ShRgb& b) {
-        double s = 0.0;
-        for (int i = 0; i < 9; ++i)
-            s += double(glm::dot(a[i] - b[i], a[i] - b[i]));
-        return std::sqrt(s);
-    };
+    const auto at = [&](const glm::vec3& p) { return interpolated(volume, p); };
     int partial = 0;
     for (const float face : {-0.6f, -0.2f, 0.2f, 0.6f}) {
         const glm::vec3 p(face, 0.5f, 0.55f), dx(1e-5f, 0.f, 0.f), step(0.2f, 0.f, 0.f);
@@ -561,8 +546,8 @@ TEST(ShProbes, InterpolationIsContinuousWhereVisibilityIsPartial) {
             const std::uint32_t index = volume.grid().cellIndex(cell);
             partial += volume.visibilityReady(index) && !volume.visibilityOpen(index);
         }
-        const double jump = distance(at(p - dx), at(p + dx));
-        const double change = distance(at(p - step), at(p + step));
+        const double jump = shDistance(at(p - dx), at(p + dx));
+        const double change = shDistance(at(p - step), at(p + step));
         EXPECT_LT(jump, 1e-3 * change) << "x face " << face;
     }
     EXPECT_GT(partial, 0) << "no crossed cell has partial visibility: the test would be vacuous";
@@ -742,8 +727,7 @@ TEST(ShProbes, AvatarNextToAMovedMobileReactsWithinAFewFrames) {
     glm::vec3 t;
     volume.grid().locate(avatarAt, cell, t);
     for (int c = 0; c < 8; ++c)
-        EXPECT_FALSE(room.system.isStale(
-            volume.grid().probeIndex(cell + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1))));
+        EXPECT_FALSE(room.system.isStale(volume.grid().cornerProbe(cell, c)));
     EXPECT_GT(room.system.staleCount(), 0u) << "everything refreshed: priority not exercised";
     // The avatar's lighting is the interpolation of the refreshed probes.
     sh::ShRgb expected;

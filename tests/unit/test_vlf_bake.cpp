@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <random>
+#include <vector>
 
 using namespace qgi;
 using namespace qgi::vlf;
@@ -82,6 +83,15 @@ struct EmitterScene {
                                   lo.z + (hi.z - lo.z) * (j + 0.5) / 32);
         return sum / (32 * 32);
     }
+    /// texelMean() over texel (tx, ty) of face `face` of a baked VLF of this scene.
+    double texelMean(const Vlf& v, std::uint32_t face, std::uint32_t tx, std::uint32_t ty) const {
+        const FaceMap& m = v.faceMaps()[face];
+        const Face& f = v.faces()[face];
+        const glm::vec3 centre = v.texelCenter(face, tx, ty);
+        const glm::vec3 half = 0.5f * (m.texelU * f.axisU + m.texelV * f.axisV);
+        return texelMean(glm::min(centre - half, centre + half),
+                         glm::max(centre - half, centre + half));
+    }
 };
 
 /// Area-weighted mean of the total irradiance over face `face`.
@@ -94,6 +104,28 @@ glm::dvec3 faceMeanIrradiance(const Vlf& v, std::uint32_t face) {
         w += v.texelCoverage()[t];
     }
     return sum / w;
+}
+
+/// Sample mean of independent estimates and its standard error (from the sample variance).
+struct SampleMean {
+    double mean = 0.0, standardError = 0.0;
+};
+SampleMean sampleMean(const std::vector<double>& values) {
+    const double n = double(values.size());
+    SampleMean out;
+    for (double x : values)
+        out.mean += x / n;
+    double var = 0.0;
+    for (double x : values)
+        var += (x - out.mean) * (x - out.mean) / (n - 1);
+    out.standardError = std::sqrt(var / n);
+    return out;
+}
+
+/// The centre line of cell (i, j) of direction psf's projection plane, a point on it.
+glm::vec3 cellCentreLine(const Vlf& v, std::size_t psf, int i, int j) {
+    const float h = v.cellWidth();
+    return v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
 }
 
 } // namespace
@@ -201,12 +233,7 @@ TEST(VlfBake, WhiteFurnaceGivesTheGeometricSeries) {
             values[f].push_back(Le + rho / kPi * faceMeanIrradiance(v, f).x);
     }
     for (std::size_t f = 0; f < values.size(); ++f) {
-        double mean = 0, var = 0;
-        for (double x : values[f])
-            mean += x / seeds;
-        for (double x : values[f])
-            var += (x - mean) * (x - mean) / (seeds - 1);
-        const double se = std::sqrt(var / seeds);
+        const auto [mean, se] = sampleMean(values[f]);
         // Student t with 15 degrees of freedom: |t| > 4.5 has probability < 1e-3.
         EXPECT_NEAR(mean, expected, 4.5 * se + 1e-5 * expected) << "face " << f;
         EXPECT_LT(se, 0.01 * expected) << "the estimate should be precise enough to test";
@@ -236,25 +263,17 @@ TEST(VlfBake, DiffusePointUnderARectangularEmitter) {
         s.seed = std::uint64_t(seed);
         const Vlf v = bakeVlf(*scene, s);
         const FaceMap& m = v.faceMaps()[std::size_t(floor)];
-        const Face& f = v.faces()[std::size_t(floor)];
         for (std::size_t p = 0; p < probes.size(); ++p) {
             const glm::vec3 x(probes[p].x, 0.f, probes[p].y);
             const std::uint32_t t = v.texelAt(std::uint32_t(floor), x);
             values[p].push_back(v.irradiance()[t].x);
             const std::uint32_t tx = (t - m.firstTexel) % m.width,
                                 ty = (t - m.firstTexel) / m.width;
-            const glm::vec3 c = v.texelCenter(std::uint32_t(floor), tx, ty);
-            const glm::vec3 half = 0.5f * (m.texelU * f.axisU + m.texelV * f.axisV);
-            truth[p] = es.texelMean(glm::min(c - half, c + half), glm::max(c - half, c + half));
+            truth[p] = es.texelMean(v, std::uint32_t(floor), tx, ty);
         }
     }
     for (std::size_t p = 0; p < probes.size(); ++p) {
-        double mean = 0, var = 0;
-        for (double x : values[p])
-            mean += x / seeds;
-        for (double x : values[p])
-            var += (x - mean) * (x - mean) / (seeds - 1);
-        const double se = std::sqrt(var / seeds);
+        const auto [mean, se] = sampleMean(values[p]);
         // Student t, 7 degrees of freedom: |t| > 5.4 has probability < 1e-3.
         EXPECT_NEAR(mean, truth[p], 5.4 * se + 1e-5 * truth[p]) << "probe " << p;
         EXPECT_LT(se, 0.1 * truth[p]); // precise enough to test
@@ -279,15 +298,11 @@ TEST(VlfBake, DiffuseErrorFallsAsDirectionsGrow) {
         s.filterSigma = 0.f;
         const Vlf v = bakeVlf(*scene, s);
         const FaceMap& m = v.faceMaps()[std::size_t(floor)];
-        const Face& f = v.faces()[std::size_t(floor)];
         double err2 = 0;
         int n = 0;
         for (std::uint32_t ty = 0; ty < m.height; ty += 2)
             for (std::uint32_t tx = 0; tx < m.width; tx += 2) {
-                const glm::vec3 c = v.texelCenter(std::uint32_t(floor), tx, ty);
-                const glm::vec3 half = 0.5f * (m.texelU * f.axisU + m.texelV * f.axisV);
-                const double truth =
-                    es.texelMean(glm::min(c - half, c + half), glm::max(c - half, c + half));
+                const double truth = es.texelMean(v, std::uint32_t(floor), tx, ty);
                 const double e = v.irradiance()[m.firstTexel + ty * m.width + tx].x - truth;
                 err2 += e * e;
                 ++n;
@@ -374,9 +389,7 @@ TEST(VlfBake, LookupAtAStoredDirectionAndCellCentreIsExact) {
             for (int i = 0; i < s.linesPerSide; i += 3) {
                 const std::int64_t c = v.cellIndex(0, psf, i, j);
                 if (c < 0 || v.tiles()[std::size_t(c)].w <= 0.f) continue;
-                const float h = v.cellWidth();
-                const glm::vec3 p =
-                    v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
+                const glm::vec3 p = cellCentreLine(v, psf, i, j);
                 const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, d);
                 const glm::vec3 x = p + t * d;
                 const glm::vec3 got = v.specularRadiance(face, x, d);
@@ -418,10 +431,8 @@ TEST(VlfBake, GlossyReflectionConservesEnergy) {
                 const std::int64_t c = v.cellIndex(0, psf, i, j);
                 if (c < 0) continue;
                 // Cells whose centre line meets the floor inside the room.
-                const float h = v.cellWidth();
                 const glm::vec3 d = float(bl.side) * v.directions().direction(psf);
-                const glm::vec3 p =
-                    v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
+                const glm::vec3 p = cellCentreLine(v, psf, i, j);
                 const glm::vec3 x = p + (-p.y / d.y) * d;
                 if (std::abs(x.x) > 1.f || std::abs(x.z) > 1.f) continue;
                 reflected += double(v.tiles()[std::size_t(c)].x) * v.lineArea() *

@@ -12,6 +12,7 @@
 #include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfField.h"
 #include "systems/vlf/VlfSystem.h"
+#include "test_meshes.h"
 #include "test_vlf_scenes.h"
 
 #include <gtest/gtest.h>
@@ -181,15 +182,8 @@ namespace {
 
 Entity addQuad(Registry& world, glm::vec3 corner, glm::vec3 u, glm::vec3 v, const Material& m,
                bool mobile = false) {
-    Mesh mesh;
-    const glm::vec3 n = glm::normalize(glm::cross(u, v));
-    for (const glm::vec3& p : {corner, corner + u, corner + u + v, corner + v}) {
-        mesh.positions.push_back(p);
-        mesh.normals.push_back(n);
-    }
-    mesh.indices = {0, 1, 2, 0, 2, 3};
     const Entity e = world.create();
-    world.emplace<Mesh>(e, mesh);
+    world.emplace<Mesh>(e, test::quadMesh(corner, u, v));
     world.emplace<WorldTransform>(e);
     world.emplace<Material>(e, m);
     if (mobile)

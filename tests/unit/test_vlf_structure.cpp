@@ -197,14 +197,20 @@ std::unique_ptr<VlfScene> glossyRoom() {
     return b.build();
 }
 
-} // namespace
-
-TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
-    const auto scene = glossyRoom();
+/// Level-2 directions, 32 x 32 lines, 4 x 4 tiles: small, yet several tiles per face.
+VlfSettings tiledSettings() {
     VlfSettings s;
     s.directionLevel = 2;
     s.linesPerSide = 32;
     s.tileSize = 4;
+    return s;
+}
+
+} // namespace
+
+TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
+    const auto scene = glossyRoom();
+    const VlfSettings s = tiledSettings();
     const Vlf v = Vlf::allocate(*scene, s);
     ASSERT_EQ(v.specularFaceCount(), 2u);
     const int N = s.linesPerSide, m = s.tileSize;
@@ -281,10 +287,7 @@ TEST(VlfStructure, ProjectionOfTheBoundsFitsThePlane) {
 
 TEST(VlfStructure, MemoryIsAccounted) {
     const auto scene = glossyRoom();
-    VlfSettings s;
-    s.directionLevel = 2;
-    s.linesPerSide = 32;
-    s.tileSize = 4;
+    const VlfSettings s = tiledSettings();
     const Vlf v = Vlf::allocate(*scene, s);
     const VlfMemory mem = v.memory();
     EXPECT_EQ(mem.directions, 33u);
