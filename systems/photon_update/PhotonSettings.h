@@ -22,8 +22,9 @@ struct PhotonSettings {
     std::uint32_t reshootBudget = 20'000;
     /// Cells of the path index (PhotonPathGrid) along the longest axis of the scene box.
     /// Finer cells give fewer candidate paths per moved mobile but more index entries (memory,
-    /// and time to re-index a path).
-    std::uint32_t gridResolution = 32;
+    /// and time to re-index a path). 24: on the atrium (4M photons) 49k candidates a frame in
+    /// 226 MiB, against 43k in 300 MiB at 32 and 71k in 175 MiB at 16 (docs/BENCHMARKS.md).
+    std::uint32_t gridResolution = 24;
     /// Paths the index re-indexes per frame once re-traced paths pass 1/64 of all (whole
     /// chunks, those with the most re-traced paths first); until then a re-traced path is
     /// found by its bounding box.
