@@ -4,6 +4,7 @@
 #include "runtime/core/Hash.h"
 
 #include <glm/geometric.hpp>
+#include <glm/vec2.hpp>
 
 #include <algorithm>
 #include <array>
@@ -34,12 +35,42 @@ bool overlaps(const std::array<glm::vec2, 3>& tri, const glm::vec2& lo, const gl
     return true;
 }
 
-bool inside(const std::array<glm::vec2, 3>& t, const glm::vec2& p) {
-    const auto edge = [](const glm::vec2& a, const glm::vec2& b, const glm::vec2& q) {
-        return (b.x - a.x) * (q.y - a.y) - (b.y - a.y) * (q.x - a.x);
-    };
-    const float e0 = edge(t[0], t[1], p), e1 = edge(t[1], t[2], p), e2 = edge(t[2], t[0], p);
-    return (e0 >= 0.f && e1 >= 0.f && e2 >= 0.f) || (e0 <= 0.f && e1 <= 0.f && e2 <= 0.f);
+/// Area of the triangle `tri` inside the box [lo, hi] (Sutherland-Hodgman clipping of the
+/// triangle against the box's four half-planes, then the shoelace formula).
+double clippedArea(const std::array<glm::dvec2, 3>& tri, const glm::dvec2& lo,
+                   const glm::dvec2& hi) {
+    std::array<glm::dvec2, 8> a{}, b{}; // a convex polygon gains at most one vertex per clip
+    std::size_t n = 3;
+    for (std::size_t i = 0; i < 3; ++i)
+        a[i] = tri[i];
+    for (int side = 0; side < 4 && n > 0; ++side) {
+        const int axis = side / 2;
+        const bool upper = side % 2 == 1;
+        const double bound = upper ? hi[axis] : lo[axis];
+        const auto in = [&](const glm::dvec2& p) {
+            return upper ? p[axis] <= bound : p[axis] >= bound;
+        };
+        std::size_t m = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            const glm::dvec2& p = a[i];
+            const glm::dvec2& q = a[(i + 1) % n];
+            const bool pin = in(p), qin = in(q);
+            if (pin) b[m++] = p;
+            if (pin != qin) {
+                const double t = (bound - p[axis]) / (q[axis] - p[axis]);
+                b[m++] = p + t * (q - p);
+            }
+        }
+        a = b;
+        n = m;
+    }
+    double twice = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const glm::dvec2& p = a[i];
+        const glm::dvec2& q = a[(i + 1) % n];
+        twice += p.x * q.y - q.x * p.y;
+    }
+    return 0.5 * std::abs(twice);
 }
 
 } // namespace
@@ -76,7 +107,8 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     for (Face& f : v.mFaces)
         f.triangles.clear();
 
-    // Irradiance maps with texel coverage from 4 x 4 samples per texel.
+    // Irradiance maps with the exact fraction of each texel inside the face: every triangle,
+    // in texel units, clipped against the texels its bounds touch.
     const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
     std::uint32_t texels = 0;
     for (const Face& f : v.mFaces) {
@@ -94,32 +126,30 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     for (std::size_t fi = 0; fi < scene.faces().size(); ++fi) {
         const Face& f = scene.faces()[fi];
         const FaceMap& m = v.mFaceMaps[fi];
-        std::vector<std::uint8_t> hits(std::size_t(m.width) * m.height * 16, 0);
+        std::vector<double> area(std::size_t(m.width) * m.height, 0.0);
         for (std::uint32_t ti : f.triangles) {
             const VlfScene::Triangle& t = scene.triangles()[ti];
-            std::array<glm::vec2, 3> q;
+            std::array<glm::dvec2, 3> q;
             int k = 0;
             for (const glm::vec3& p : {t.p0, t.p1, t.p2})
-                q[k++] = glm::vec2(glm::dot(p - f.origin, f.axisU) / m.texelU,
-                                   glm::dot(p - f.origin, f.axisV) / m.texelV) *
-                         4.f; // in sub-sample units
-            const glm::vec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
-            const glm::vec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
+                q[k++] = glm::dvec2(double(glm::dot(p - f.origin, f.axisU)) / m.texelU,
+                                    double(glm::dot(p - f.origin, f.axisV)) / m.texelV);
+            const glm::dvec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
+            const glm::dvec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
             const int x0 = std::max(0, int(std::floor(lo.x))),
-                      x1 = std::min(int(m.width * 4) - 1, int(hi.x));
+                      x1 = std::min(int(m.width) - 1, int(std::floor(hi.x)));
             const int y0 = std::max(0, int(std::floor(lo.y))),
-                      y1 = std::min(int(m.height * 4) - 1, int(hi.y));
+                      y1 = std::min(int(m.height) - 1, int(std::floor(hi.y)));
             for (int y = y0; y <= y1; ++y)
                 for (int x = x0; x <= x1; ++x)
-                    if (inside(q, glm::vec2(float(x) + 0.5f, float(y) + 0.5f)))
-                        hits[(std::size_t(y / 4) * m.width + x / 4) * 16 + (y % 4) * 4 + x % 4] = 1;
+                    area[std::size_t(y) * m.width + x] +=
+                        clippedArea(q, glm::dvec2(x, y), glm::dvec2(x + 1, y + 1));
         }
-        for (std::size_t tx = 0; tx < std::size_t(m.width) * m.height; ++tx) {
-            int n = 0;
-            for (int s = 0; s < 16; ++s)
-                n += hits[tx * 16 + s];
-            v.mCoverage[m.firstTexel + tx] = float(n) / 16.f;
-        }
+        // Triangles of a face do not overlap, so the sums stay within [0, 1] up to rounding;
+        // a texel touched only along an edge or a corner (area below 1e-6) holds nothing.
+        for (std::size_t tx = 0; tx < area.size(); ++tx)
+            v.mCoverage[m.firstTexel + tx] =
+                area[tx] < 1e-6 ? 0.f : float(std::min(area[tx], 1.0));
     }
 
     // Tiles: a specular face gets tile (s, t) of subfield i when its projection comes within

@@ -98,7 +98,9 @@ public:
 
     const std::vector<Face>& faces() const { return mFaces; }
     const std::vector<FaceMap>& faceMaps() const { return mFaceMaps; }
-    /// Fraction of each texel inside its face (4 x 4 samples), per texel.
+    /// Fraction of each texel's area inside its face (exact: the face's triangles clipped
+    /// against the texel), per texel. Deposits divide by it, so it must be exact: a texel
+    /// half inside a face that counted as 9/16 would read 11 % low.
     const std::vector<float>& texelCoverage() const { return mCoverage; }
     /// Total irradiance per texel, W/m^2.
     const std::vector<glm::vec3>& irradiance() const { return mIrradiance; }

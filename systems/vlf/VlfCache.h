@@ -19,7 +19,8 @@ struct VlfBakeStats;
  *  whose payload hash or internal sizes do not match (corrupt).                           */
 class VlfCache {
 public:
-    static constexpr std::uint32_t kVersion = 1;
+    /// 2: texel coverage is exact (clipped triangle area), no longer 4 x 4 samples.
+    static constexpr std::uint32_t kVersion = 2;
 
     /// Writes atomically (a temporary file renamed over the target). Throws qgi::Error when
     /// the file cannot be written.

@@ -229,6 +229,52 @@ void VlfScene::buildEmbree() {
     rtcCommitScene(mScene.get());
 }
 
+namespace {
+
+/// Distance from p to triangle (a, b, c), metres (0 on it).
+float distanceToTriangle(const glm::vec3& p, const glm::vec3& a, const glm::vec3& b,
+                         const glm::vec3& c) {
+    const glm::vec3 n = glm::cross(b - a, c - a);
+    const float n2 = glm::dot(n, n);
+    if (!(n2 > 0.f)) return std::numeric_limits<float>::max();
+    // Inside the prism over the triangle: the distance to its plane.
+    if (glm::dot(glm::cross(b - a, p - a), n) >= 0.f &&
+        glm::dot(glm::cross(c - b, p - b), n) >= 0.f &&
+        glm::dot(glm::cross(a - c, p - c), n) >= 0.f)
+        return std::abs(glm::dot(p - a, n)) / std::sqrt(n2);
+    // Otherwise the nearest point lies on an edge.
+    const auto segment = [&](const glm::vec3& s0, const glm::vec3& s1) {
+        const glm::vec3 e = s1 - s0;
+        const float t =
+            std::clamp(glm::dot(p - s0, e) / std::max(glm::dot(e, e), 1e-30f), 0.f, 1.f);
+        return glm::length(p - (s0 + t * e));
+    };
+    return std::min({segment(a, b), segment(b, c), segment(c, a)});
+}
+
+} // namespace
+
+std::optional<std::uint32_t> VlfScene::faceAt(const glm::vec3& x, const glm::vec3& n,
+                                              float tolerance) const {
+    std::optional<std::uint32_t> best;
+    float bestDistance = tolerance;
+    for (std::uint32_t f = 0; f < mFaces.size(); ++f) {
+        const Face& face = mFaces[f];
+        if (glm::dot(face.normal, n) < 0.99f) continue;
+        if (std::abs(glm::dot(face.normal, x) - face.offset) > bestDistance) continue;
+        for (std::uint32_t ti : face.triangles) {
+            const Triangle& t = mTriangles[ti];
+            const float d = distanceToTriangle(x, t.p0, t.p1, t.p2);
+            if (d <= bestDistance) {
+                bestDistance = d;
+                best = f;
+                if (d == 0.f) return best;
+            }
+        }
+    }
+    return best;
+}
+
 Crossing VlfScene::firstHit(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax) const {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 namespace qgi {
@@ -99,6 +100,17 @@ public:
     /// 64-bit hash of everything the bake reads from the scene (geometry, faces, materials,
     /// lights, environment), for cache keys.
     std::uint64_t contentHash() const { return mHash; }
+
+    /// The face that holds world point `x` on the side of unit normal `n`: among the faces
+    /// whose normal is within 8 degrees of n, the one whose triangles come nearest to x
+    /// (distance in metres: off the plane and, in the plane, outside the triangles), or
+    /// nullopt when none comes within `tolerance` metres. A plane test alone is not enough:
+    /// a non-planar quad (the cornell box's red wall) makes two faces whose planes agree to a
+    /// millimetre near their shared edge and whose bounding rectangles both cover the whole
+    /// quad, and a face's irradiance map holds nothing outside its triangles. Brute force
+    /// over the candidate faces' triangles: for tools and tests, not per-frame lookups.
+    std::optional<std::uint32_t> faceAt(const glm::vec3& x, const glm::vec3& n,
+                                        float tolerance = 1e-3f) const;
 
     /// Every crossing of the segment origin + t * dir, t in [0, tMax] (dir unit), sorted by t;
     /// crossings closer than `merge` to the previous one are dropped (a shared edge hit

@@ -490,3 +490,133 @@ TEST(VlfBake, PointLightDirectPass) {
             EXPECT_NEAR(v.irradiance()[m.firstTexel + ty * m.width + tx].x, E, 1e-5f * E);
         }
 }
+
+TEST(VlfBake, NonPlanarQuadsReadPiLeThroughTheFaceThatHoldsThePoint) {
+    // A closed room whose far corner is pushed 4 cm out along the diagonal: the three walls
+    // that meet there are non-planar quads, each baked as two triangle faces whose planes
+    // agree within a millimetre near their shared diagonal and whose bounding rectangles both
+    // cover the whole wall (as the cornell box's red wall). Every wall emits L_e and reflects
+    // nothing, so after one pass the irradiance is pi L_e at every point of every wall (a
+    // closed enclosure of uniform radiance). A reading through the wrong half's map gives 0;
+    // the texels along each diagonal are partly covered, and their irradiance (deposited flux
+    // over covered area) is right only with exact coverage.
+    const float Le = 1.f;
+    test::VlfSceneBuilder b;
+    const std::uint32_t lamp = b.material(glm::vec3(0.f), glm::vec3(Le));
+    const glm::vec3 lo(-1.f, 0.f, -1.f), hi(1.f, 2.f, 1.f), push(0.04f);
+    b.box(lo, hi, true, [&](int, int) { return lamp; });
+    for (auto& t : b.triangles)
+        for (glm::vec3* p : {&t.p0, &t.p1, &t.p2})
+            if (*p == hi) *p += push;
+    const auto scene = b.build();
+    // Points on the three bent walls near the diagonal of each (within 3 cm on both sides,
+    // where the plane test cannot tell the halves apart) and elsewhere.
+    struct Probe {
+        glm::vec3 x, n;
+    };
+    std::vector<Probe> probes;
+    std::size_t splitWalls = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+        const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+        // The wall's corners: the pushed one q11 and its diagonal partner q00.
+        const auto corner = [&](int i, int j) {
+            glm::vec3 p;
+            p[axis] = hi[axis];
+            p[a1] = i ? hi[a1] : lo[a1];
+            p[a2] = j ? hi[a2] : lo[a2];
+            return p == hi ? p + push : p;
+        };
+        const glm::vec3 q00 = corner(0, 0), q10 = corner(1, 0), q01 = corner(0, 1),
+                        q11 = corner(1, 1);
+        glm::vec3 n(0.f);
+        n[axis] = -1.f;
+        std::size_t faces = 0;
+        for (const Face& f : scene->faces())
+            faces += glm::dot(f.normal, n) > 0.99f;
+        splitWalls += faces == 2;
+        for (float s : {0.2f, 0.5f, 0.8f})
+            for (float off : {-0.03f, -0.01f, 0.01f, 0.03f, 0.3f, -0.3f}) {
+                // Along the diagonal q00 -> q11, then `off` (metres, roughly) across it, on
+                // the triangle that holds that side.
+                const glm::vec3 onDiagonal = q00 + s * (q11 - q00);
+                const glm::vec3 across = off > 0.f ? q10 : q01;
+                const glm::vec3 mid = 0.5f * (q00 + q11);
+                const float t = std::abs(off) / glm::length(across - mid);
+                probes.push_back({onDiagonal + t * (across - mid), n});
+            }
+    }
+    ASSERT_EQ(splitWalls, 3u) << "each bent wall should bake as two faces";
+    std::vector<std::uint32_t> faceOf;
+    for (const Probe& p : probes) {
+        const std::optional<std::uint32_t> f = scene->faceAt(p.x, p.n);
+        ASSERT_TRUE(f.has_value()) << p.x.x << " " << p.x.y << " " << p.x.z;
+        // The face returned holds the point: one of its triangles contains it.
+        bool holds = false;
+        for (std::uint32_t ti : scene->faces()[*f].triangles) {
+            const VlfScene::Triangle& t = scene->triangles()[ti];
+            const glm::vec3 nt = glm::cross(t.p1 - t.p0, t.p2 - t.p0);
+            holds = holds || (glm::dot(glm::cross(t.p1 - t.p0, p.x - t.p0), nt) >= 0.f &&
+                              glm::dot(glm::cross(t.p2 - t.p1, p.x - t.p1), nt) >= 0.f &&
+                              glm::dot(glm::cross(t.p0 - t.p2, p.x - t.p2), nt) >= 0.f &&
+                              std::abs(glm::dot(p.x - t.p0, nt)) < 1e-5f * glm::length(nt));
+        }
+        EXPECT_TRUE(holds) << p.x.x << " " << p.x.y << " " << p.x.z;
+        faceOf.push_back(*f);
+    }
+    const int seeds = 16;
+    std::vector<std::vector<double>> values(probes.size());
+    for (int seed = 1; seed <= seeds; ++seed) {
+        VlfSettings s;
+        s.directionLevel = 3;
+        s.linesPerSide = 32;
+        s.tileSize = 8;
+        s.iterations = 1;
+        s.jitterSamples = 2;
+        s.texelCells = 2.f;
+        s.seed = std::uint64_t(seed);
+        const Vlf v = bakeVlf(*scene, s);
+        for (std::size_t p = 0; p < probes.size(); ++p)
+            values[p].push_back(v.sampleTexels(v.irradiance(), faceOf[p], probes[p].x).x);
+    }
+    const double expected = kPi * Le;
+    for (std::size_t p = 0; p < probes.size(); ++p) {
+        double mean = 0, var = 0;
+        for (double x : values[p])
+            mean += x / seeds;
+        for (double x : values[p])
+            var += (x - mean) * (x - mean) / (seeds - 1);
+        const double se = std::sqrt(var / seeds);
+        // Student t with 15 degrees of freedom: |t| > 6.5 has probability 1e-5, so all 54
+        // probes pass together with probability > 0.999.
+        EXPECT_NEAR(mean, expected, 6.5 * se + 1e-5 * expected) << "probe " << p;
+        EXPECT_LT(se, 0.1 * expected) << "the estimate should be precise enough to test";
+    }
+}
+
+
+TEST(VlfBake, FaceAtPrefersTheNearestOfStackedFaces) {
+    // A 10 cm lamp hung 0.5 mm below a 2 m ceiling, both facing down (cornell's luminaire):
+    // both planes lie within the 1 mm tolerance of a point on the lamp, and the ceiling's
+    // triangles hold its projection, so only the distance tells them apart.
+    test::VlfSceneBuilder b;
+    const std::uint32_t white = b.material(glm::vec3(0.7f));
+    const std::uint32_t lamp = b.material(glm::vec3(0.f), glm::vec3(5.f));
+    b.quad({-1.f, 2.f, -1.f}, {1.f, 2.f, -1.f}, {1.f, 2.f, 1.f}, {-1.f, 2.f, 1.f}, white);
+    const float y = 2.f - 5e-4f;
+    b.quad({-.05f, y, -.05f}, {.05f, y, -.05f}, {.05f, y, .05f}, {-.05f, y, .05f}, lamp);
+    const auto scene = b.build();
+    const glm::vec3 down(0.f, -1.f, 0.f);
+    const int ceiling = test::findFace(*scene, down, {0.f, 2.f, 0.f});
+    const int light = test::findFace(*scene, down, {0.f, y, 0.f});
+    ASSERT_GE(ceiling, 0);
+    ASSERT_GE(light, 0);
+    ASSERT_NE(ceiling, light);
+    EXPECT_EQ(scene->faceAt({0.02f, y, -0.03f}, down), std::optional<std::uint32_t>(light));
+    EXPECT_EQ(scene->faceAt({0.05f, y, 0.05f}, down), std::optional<std::uint32_t>(light));
+    EXPECT_EQ(scene->faceAt({0.02f, 2.f, -0.03f}, down), std::optional<std::uint32_t>(ceiling));
+    EXPECT_EQ(scene->faceAt({0.3f, 2.f, 0.6f}, down), std::optional<std::uint32_t>(ceiling));
+    // The back side, a point 2 mm off every face, and a point beside the ceiling hold none.
+    EXPECT_EQ(scene->faceAt({0.3f, 2.f, 0.6f}, -down), std::nullopt);
+    EXPECT_EQ(scene->faceAt({0.3f, 2.002f, 0.6f}, down), std::nullopt);
+    EXPECT_EQ(scene->faceAt({1.01f, 2.f, 0.f}, down), std::nullopt);
+}
