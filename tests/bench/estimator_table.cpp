@@ -131,20 +131,16 @@ Row measure(std::uint32_t photons, IrradianceEstimator estimator, float radius,
 
     const RayScene& scene = world.ctx().get<RayScene>();
     const auto samples = reference::openStaticVertices(world, scene, radius, options.vertices);
-    std::vector<double> relative;
-    double total = 0, totalReference = 0;
+    std::vector<double> estimates, references;
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const glm::vec3& e = samples[i].irradiance;
-        const double estimate = double(e.r) + e.g + e.b;
-        const double ref = expected[i].mean.r + expected[i].mean.g + expected[i].mean.b;
-        if (ref <= 0.0) continue;
-        relative.push_back(std::abs(estimate - ref) / ref);
-        total += estimate;
-        totalReference += ref;
+        estimates.push_back(double(e.r) + e.g + e.b);
+        references.push_back(expected[i].mean.r + expected[i].mean.g + expected[i].mean.b);
     }
-    row.median = reference::percentile(relative, 0.5);
-    row.p90 = reference::percentile(relative, 0.9);
-    row.sum = total / totalReference - 1.0;
+    const reference::ErrorSummary errors = reference::summariseErrors(estimates, references);
+    row.median = errors.median;
+    row.p90 = errors.p90;
+    row.sum = errors.sum;
 
     // Frames: the block slides 1 cm along x per frame.
     const Entity mobile = world.view<const MobileMesh>().entities().front();

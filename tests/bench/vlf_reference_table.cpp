@@ -129,22 +129,20 @@ int run(const Options& options) {
         const vlf::Vlf field = vlf::bakeVlf(*scene, settings);
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        std::vector<double> relative;
-        double total = 0, totalReference = 0;
+        std::vector<double> estimates, references;
         for (std::size_t i = 0; i < xs.size(); ++i) {
-            const double ref = expected[i].mean.r + expected[i].mean.g + expected[i].mean.b;
-            if (!faceOf[i] || ref <= 0.0) continue;
+            references.push_back(expected[i].mean.r + expected[i].mean.g + expected[i].mean.b);
+            if (!faceOf[i]) {
+                estimates.push_back(std::nan("")); // on no face: left out
+                continue;
+            }
             const glm::vec3 e = field.sampleTexels(field.irradiance(), *faceOf[i], xs[i]);
-            const double estimate = double(e.r) + e.g + e.b;
-            relative.push_back(std::abs(estimate - ref) / ref);
-            total += estimate;
-            totalReference += ref;
+            estimates.push_back(double(e.r) + e.g + e.b);
         }
+        const reference::ErrorSummary errors = reference::summariseErrors(estimates, references);
         std::printf("| %zu | %.2f | %.1f %% | %.1f %% | %+.1f %% |\n",
-                    std::size_t(2 * (1u << (2 * level)) + 1), seconds,
-                    100 * reference::percentile(relative, 0.5),
-                    100 * reference::percentile(relative, 0.9),
-                    100 * (total / totalReference - 1.0));
+                    std::size_t(2 * (1u << (2 * level)) + 1), seconds, 100 * errors.median,
+                    100 * errors.p90, 100 * errors.sum);
         std::fflush(stdout);
     }
     return 0;

@@ -59,4 +59,22 @@ double percentile(std::vector<double> values, double p) {
     return values[std::min(values.size() - 1, std::size_t(p * double(values.size())))];
 }
 
+ErrorSummary summariseErrors(const std::vector<double>& estimates,
+                             const std::vector<double>& references) {
+    std::vector<double> relative;
+    double total = 0, totalReference = 0;
+    for (std::size_t i = 0; i < estimates.size() && i < references.size(); ++i) {
+        if (!(references[i] > 0.0) || std::isnan(estimates[i])) continue;
+        relative.push_back(std::abs(estimates[i] - references[i]) / references[i]);
+        total += estimates[i];
+        totalReference += references[i];
+    }
+    ErrorSummary out;
+    out.points = relative.size();
+    out.median = percentile(relative, 0.5);
+    out.p90 = percentile(relative, 0.9);
+    out.sum = totalReference > 0.0 ? total / totalReference - 1.0 : 0.0;
+    return out;
+}
+
 } // namespace qgi::reference

@@ -32,4 +32,15 @@ std::vector<VertexSample> openStaticVertices(const Registry& registry, const Ray
 /// The p-quantile (0..1) of `values` by the nearest-rank rule; 0 for an empty list.
 double percentile(std::vector<double> values, double p);
 
+/// Estimates against reference values (summed RGB, W/m^2) over points: the median and 90th
+/// percentile of |estimate - reference| / reference, and the summed estimate over the summed
+/// reference minus 1. Points whose reference is not positive, or whose estimate is NaN (none
+/// available), are left out.
+struct ErrorSummary {
+    double median = 0, p90 = 0, sum = 0;
+    std::size_t points = 0;
+};
+ErrorSummary summariseErrors(const std::vector<double>& estimates,
+                             const std::vector<double>& references);
+
 } // namespace qgi::reference
