@@ -3,6 +3,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
@@ -86,8 +87,13 @@ void PointCacheSystem::build(Registry& registry) {
         std::iota(all.begin(), all.end(), 0u);
         shadePoints(*scene, cache, all);
         if (!s.cacheFile.empty()) {
-            writePointCacheFile(s.cacheFile, key, cache);
-            logInfo("point cache: wrote ", cache.size(), " points to '", s.cacheFile, "'");
+            // A file that cannot be written costs the next start a bake, not this one its cache.
+            try {
+                writePointCacheFile(s.cacheFile, key, cache);
+                logInfo("point cache: wrote ", cache.size(), " points to '", s.cacheFile, "'");
+            } catch (const Error& e) {
+                logWarning(e.what(), "; the point cache is used without a file");
+            }
         }
     }
     cache.indirect.assign(cache.size(), glm::vec3(0.f));

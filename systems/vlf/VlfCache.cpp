@@ -231,8 +231,13 @@ Vlf VlfCache::loadOrBake(const VlfScene& scene, const VlfSettings& settings,
     Vlf v = bakeVlf(scene, settings, stats);
     if (baked) *baked = true;
     if (!path.empty()) {
-        save(v, path);
-        logInfo("VLF: saved ", path.string());
+        // A cache that cannot be written costs the next start a bake, not this one its field.
+        try {
+            save(v, path);
+            logInfo("VLF: saved ", path.string());
+        } catch (const Error& e) {
+            logWarning(e.what(), "; the VLF is used without a cache file");
+        }
     }
     return v;
 }

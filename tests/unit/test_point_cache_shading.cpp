@@ -222,6 +222,18 @@ PointCacheSettings smallSettings(const std::string& file) {
     return s;
 }
 
+TEST(PointCacheFile, AnUnwritableFileStillGivesTheBuiltCache) {
+    // The file's folder is a regular file: no one, root included, can write there.
+    const std::filesystem::path blocker = scratch("not_a_folder");
+    { std::ofstream(blocker) << 'x'; }
+    ShadowScene scene;
+    PointCacheSystem system(smallSettings((blocker / "cache.qpc").string()));
+    EXPECT_NO_THROW(system.build(scene.registry));
+    EXPECT_FALSE(system.loadedFromFile());
+    EXPECT_GT(scene.registry.ctx().get<PointCache>().size(), 20u);
+    std::filesystem::remove(blocker);
+}
+
 TEST(PointCacheFile, RoundTripsAndIsLoadedOnTheNextStart) {
     const std::string file = scratch("roundtrip.qpc").string();
     std::filesystem::remove(file);

@@ -176,6 +176,19 @@ TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
     std::filesystem::remove(path);
 }
 
+TEST(VlfCache, AnUnwritableCacheFileStillGivesTheBakedField) {
+    // The cache's folder is a regular file: no one, root included, can write there.
+    const auto scene = glossyRoom();
+    const VlfSettings s = small();
+    const auto blocker = tempFile("not_a_folder");
+    writeAll(blocker, {'x'});
+    bool baked = false;
+    const Vlf field = VlfCache::loadOrBake(*scene, s, blocker / "field.vlf", &baked);
+    EXPECT_TRUE(baked);
+    EXPECT_EQ(field.tiles(), bakeVlf(*scene, s).tiles());
+    std::filesystem::remove(blocker);
+}
+
 // ---- VlfSystem: the registry's static meshes in, the VlfField resource out ------------------
 
 namespace {
