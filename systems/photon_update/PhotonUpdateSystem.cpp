@@ -318,7 +318,7 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
         mMoved.push_back({e, pose, glm::inverse(pose), widened(mobile.objectBounds),
                           widened(transformBox(mobile.objectBounds, mobile.pose)),
                           widened(transformBox(mobile.objectBounds, pose)),
-                          glm::mat3(pose) == glm::mat3(mobile.pose)});
+                          glm::mat3(pose) == glm::mat3(mobile.pose) ? &mobile : nullptr});
         mobile.pose = pose;
         delta.movedMobiles.push_back(e);
     }
@@ -421,7 +421,7 @@ void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonS
         const Entity hit = segments.hitEntity[store.segmentIndex(mCandidates[i],
                                                                  std::uint32_t(mFirstAffected[i]))];
         for (const MovedMobile& m : mMoved)
-            if (hit == m.entity) return m.translatedOnly ? &mMobiles[mMobileIndex.at(hit)] : nullptr;
+            if (hit == m.entity) return m.translated;
         return nullptr;
     };
     mRecast.clear();

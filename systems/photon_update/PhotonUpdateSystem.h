@@ -101,7 +101,9 @@ private:
         glm::mat4 toObject{1.f}; ///< its inverse
         Aabb objectBox;          ///< object-space bounds, slightly widened
         Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
-        bool translatedOnly = false; ///< the linear part of the pose is unchanged
+        /// The mobile, when the linear part of its pose is unchanged (it only translated);
+        /// null otherwise. Points into mMobiles, which does not change between full shots.
+        const Mobile* translated = nullptr;
     };
     struct Sweep {
         std::uint32_t remaining = 0; ///< photons left to re-shoot since the light last changed

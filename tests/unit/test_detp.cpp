@@ -15,6 +15,7 @@
 #include "systems/photon_update/PhotonStore.h"
 
 #include <gmock/gmock.h>
+#include "test_detp_world.h"
 #include "test_meshes.h"
 
 #include <gtest/gtest.h>
@@ -41,28 +42,9 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr double kPi = glm::pi<double>();
 const glm::mat4 kIdentity{1.f};
 
+using test::addDetpResources;
+using test::addReceiverMesh;
 using test::gridMesh;
-
-Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world, bool mobile,
-               const char* name) {
-    const Entity e = registry.create();
-    registry.emplace<Name>(e, name);
-    registry.emplace<Mesh>(e, std::move(mesh));
-    registry.emplace<WorldTransform>(e, world);
-    if (mobile)
-        registry.emplace<MobileMesh>(e);
-    else
-        registry.emplace<StaticMesh>(e);
-    return e;
-}
-
-/// The world resources the system reads: the RayScene (its Embree device hosts the discs),
-/// an empty ray set and a delta that asks for a full estimate.
-void addResources(Registry& registry) {
-    registry.ctx().emplace<RayScene>();
-    registry.ctx().emplace<PhotonStore>();
-    registry.ctx().emplace<PhotonDelta>().full = true;
-}
 
 struct Segment {
     glm::vec3 origin{0.f};
@@ -123,10 +105,10 @@ TEST(Detp, PointLightOverABlackPlane) {
     constexpr double kPower = 100.0, kHeight = 1.0;
     constexpr std::size_t kPhotons = 2'000'000;
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     // A 2 x 2 quad floor over [-1, 1]^2 at y = 0: vertex 4 is the foot of the light.
     const Entity floor =
-        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+        addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
                 kIdentity, false, "floor");
     ASSERT_EQ(registry.get<Mesh>(floor).positions[4], glm::vec3(0.f));
 
@@ -197,9 +179,9 @@ std::vector<double> beamErrors(Registry& registry, DetpIrradianceSystem& system,
 TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
     constexpr double kRadius = 0.04;
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     const Entity floor =
-        addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
                 kIdentity, false, "floor");
     DetpSettings settings;
     settings.discRadius = float(kRadius);
@@ -234,9 +216,9 @@ TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
 
 TEST(Detp, SegmentsFromBehindDoNotCount) {
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     const Entity floor =
-        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+        addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
                 kIdentity, false, "floor");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     const Segment fromBelow{{0.f, -1.f, 0.f}, {0.f, 1.f, 0.f}, kInf, glm::vec3(3.f), {}, 0, 1};
@@ -257,9 +239,9 @@ TEST(Detp, SegmentsFromBehindDoNotCount) {
 
 TEST(Detp, HybridModeSkipsOnlyTheSegmentsThatLeaveAPunctualLight) {
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     const Entity floor =
-        addMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
+        addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
                 kIdentity, false, "floor");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     store.lights = {PhotonLight{{}, glm::vec3(2.f), 2, true},    // a point light
@@ -325,12 +307,12 @@ struct IncrementalWorld {
     static constexpr float kRadius = 0.06f; // discs overlap: spacing 0.05
 
     IncrementalWorld() {
-        addResources(registry);
-        floor = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
+        addDetpResources(registry);
+        floor = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
                         kIdentity, false, "floor");
-        wall = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
+        wall = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
                        kIdentity, false, "wall");
-        plate = addMesh(registry,
+        plate = addReceiverMesh(registry,
                         gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
                         glm::translate(kIdentity, {0.5f, 0.3f, 0.5f}), true, "plate");
     }
@@ -585,12 +567,12 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     // A 4 m floor with photons all over it and a small plate: the paths near the plate are a
     // small part of the ray set.
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     const Entity floor =
-        addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 4.f}, {4.f, 0.f, 0.f}, 40),
+        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 4.f}, {4.f, 0.f, 0.f}, 40),
                 kIdentity, false, "floor");
     const Entity plate =
-        addMesh(registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
+        addReceiverMesh(registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
                 glm::translate(kIdentity, {1.f, 0.5f, 1.f}), true, "plate");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     std::mt19937 rng(3);
@@ -708,8 +690,8 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     EXPECT_FLOAT_EQ(defaultDiscRadius(info, 100.0, 0), 0.05f);
 
     Registry registry;
-    addResources(registry);
-    addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2), kIdentity,
+    addDetpResources(registry);
+    addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2), kIdentity,
             false, "floor");
     DetpIrradianceSystem system(DetpSettings{});
     EXPECT_THROW(system.build(registry), Error); // radius 0 and no SceneInfo
@@ -721,8 +703,8 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
 TEST(Detp, RejectsMeshesItCannotUse) {
     const auto buildError = [](Mesh mesh) {
         Registry registry;
-        addResources(registry);
-        addMesh(registry, std::move(mesh), kIdentity, false, "bad");
+        addDetpResources(registry);
+        addReceiverMesh(registry, std::move(mesh), kIdentity, false, "bad");
         DetpSettings settings;
         settings.discRadius = 0.1f;
         DetpIrradianceSystem system(settings);

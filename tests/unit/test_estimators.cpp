@@ -15,6 +15,7 @@
 #include "runtime/raytrace/RayScene.h"
 #include "systems/photon_update/PhotonStore.h"
 
+#include "test_detp_world.h"
 #include "test_meshes.h"
 
 #include <gtest/gtest.h>
@@ -175,25 +176,9 @@ TEST(PhotonKdTree, NearestEqualsBruteForce) {
 
 // ---- scenes for the estimators -------------------------------------------------------------
 
+using test::addDetpResources;
+using test::addReceiverMesh;
 using test::gridMesh;
-
-Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world, bool mobile) {
-    const Entity e = registry.create();
-    registry.emplace<Name>(e, mobile ? "mobile" : "static");
-    registry.emplace<Mesh>(e, std::move(mesh));
-    registry.emplace<WorldTransform>(e, world);
-    if (mobile)
-        registry.emplace<MobileMesh>(e);
-    else
-        registry.emplace<StaticMesh>(e);
-    return e;
-}
-
-void addResources(Registry& registry) {
-    registry.ctx().emplace<RayScene>();
-    registry.ctx().emplace<PhotonStore>();
-    registry.ctx().emplace<PhotonDelta>().full = true;
-}
 
 void pushSegment(PhotonSegments& s, glm::vec3 origin, glm::vec3 direction, float length,
                  glm::vec3 power, Entity hit, std::uint32_t primitive, std::uint8_t bounce) {
@@ -214,9 +199,9 @@ TEST(PhotonMap, BorderBiasAgainstDetp) {
     constexpr std::size_t kPhotons = 1'000'000;
     constexpr double kIrradiance = 1.0, kBeamArea = 4.0;
     Registry registry;
-    addResources(registry);
+    addDetpResources(registry);
     const Entity square =
-        addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
                 kIdentity, false);
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     std::mt19937_64 rng(11);
@@ -276,10 +261,10 @@ struct ImpactWorld {
     ReceiverSet receivers;
 
     ImpactWorld() {
-        addResources(registry);
-        floor = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+        addDetpResources(registry);
+        floor = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
                         kIdentity, false);
-        plate = addMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 0.2f}, {0.2f, 0.f, 0.f}, 4),
+        plate = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 0.2f}, {0.2f, 0.f, 0.f}, 4),
                         glm::translate(kIdentity, {0.4f, 0.3f, 0.4f}), true);
         other = registry.create(); // hit by photons but not a receiver: an avatar, say
         receivers.build(registry);
