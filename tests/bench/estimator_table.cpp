@@ -169,25 +169,17 @@ int run(const Options& options) {
     scene.build(world);
     const float radius = options.discRadius;
     const auto samples = reference::openStaticVertices(world, scene, radius, options.vertices);
-    std::vector<glm::vec3> xs, ns;
-    for (const auto& s : samples) {
-        xs.push_back(s.position);
-        ns.push_back(s.normal);
-    }
-    reference::ReferenceSettings referenceSettings;
-    referenceSettings.samplesPerPoint = options.referencePaths;
-    referenceSettings.includeEnvironment = false;
-    std::fprintf(stderr, "reference: %zu vertices x %u paths ...\n", xs.size(),
+    std::fprintf(stderr, "reference: %zu vertices x %u paths ...\n", samples.size(),
                  options.referencePaths);
     auto start = Clock::now();
     const auto expected =
-        reference::IrradianceReference(world, scene, referenceSettings).estimate(xs, ns);
+        reference::photonReferenceAt(world, scene, samples, options.referencePaths);
     std::fprintf(stderr, "reference: %.1f s\n", secondsSince(start));
 
     std::printf("cornell refined to %.3f m edges, photon mode, r = %.4f m, %zu static vertices "
                 "with open neighbourhoods, Monte Carlo reference at %u paths each; frame = the "
                 "block sliding 1 cm\n\n",
-                double(world.ctx().get<SceneInfo>().maxEdgeLength), double(radius), xs.size(),
+                double(world.ctx().get<SceneInfo>().maxEdgeLength), double(radius), samples.size(),
                 options.referencePaths);
     std::printf("| estimator | photons | first shot (s) | full estimate (s) | frame: photons "
                 "(ms) | frame: estimate (ms) | error median | error p90 | sum |\n");

@@ -90,26 +90,17 @@ int run(const Options& options) {
     RayScene& rays = world.ctx().emplace<RayScene>();
     rays.build(world);
     const auto samples = reference::openStaticVertices(world, rays, 0.01f, options.vertices);
-    std::vector<glm::vec3> xs, ns;
-    for (const auto& s : samples) {
-        xs.push_back(s.position);
-        ns.push_back(s.normal);
-    }
-    reference::ReferenceSettings referenceSettings;
-    referenceSettings.samplesPerPoint = options.referencePaths;
-    referenceSettings.includeEnvironment = false;
-    std::fprintf(stderr, "reference: %zu vertices x %u paths ...\n", xs.size(),
+    std::fprintf(stderr, "reference: %zu vertices x %u paths ...\n", samples.size(),
                  options.referencePaths);
-    const auto expected =
-        reference::IrradianceReference(world, rays, referenceSettings).estimate(xs, ns);
+    const auto expected = reference::photonReferenceAt(world, rays, samples, options.referencePaths);
 
     const std::unique_ptr<vlf::VlfScene> scene = vlf::VlfScene::fromRegistry(world);
     // The face whose triangles hold each vertex (a plane-and-rectangle test picks the wrong
     // half of the non-planar red wall near its diagonal, where the map holds nothing).
     std::vector<std::optional<std::uint32_t>> faceOf;
     std::size_t unmatched = 0;
-    for (std::size_t i = 0; i < xs.size(); ++i) {
-        faceOf.push_back(scene->faceAt(xs[i], ns[i]));
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        faceOf.push_back(scene->faceAt(samples[i].position, samples[i].normal));
         unmatched += !faceOf.back();
     }
     if (unmatched > 0) std::fprintf(stderr, "%zu vertices lie on no VLF face\n", unmatched);
@@ -117,7 +108,7 @@ int run(const Options& options) {
     std::printf("cornell without its mobile block, black sky, %d iterations, 64 x 64 lines; "
                 "%zu static vertices with open neighbourhoods, Monte Carlo reference at %u paths "
                 "each\n\n",
-                options.iterations, xs.size(), options.referencePaths);
+                options.iterations, samples.size(), options.referencePaths);
     std::printf("| directions | bake (s) | error median | error p90 | sum |\n|---|---|---|---|---|\n");
     for (const int level : options.levels) {
         VlfSettings settings;
@@ -130,13 +121,13 @@ int run(const Options& options) {
         const double seconds =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         std::vector<double> estimates, references;
-        for (std::size_t i = 0; i < xs.size(); ++i) {
+        for (std::size_t i = 0; i < samples.size(); ++i) {
             references.push_back(expected[i].mean.r + expected[i].mean.g + expected[i].mean.b);
             if (!faceOf[i]) {
                 estimates.push_back(std::nan("")); // on no face: left out
                 continue;
             }
-            const glm::vec3 e = field.sampleTexels(field.irradiance(), *faceOf[i], xs[i]);
+            const glm::vec3 e = field.sampleTexels(field.irradiance(), *faceOf[i], samples[i].position);
             estimates.push_back(double(e.r) + e.g + e.b);
         }
         const reference::ErrorSummary errors = reference::summariseErrors(estimates, references);

@@ -1,5 +1,7 @@
 #include "tests/reference/VertexSamples.h"
 
+#include "tests/reference/IrradianceReference.h"
+
 #include "components/Mesh.h"
 #include "components/StaticMesh.h"
 #include "components/VertexIrradiance.h"
@@ -51,6 +53,20 @@ std::vector<VertexSample> openStaticVertices(const Registry& registry, const Ray
     for (std::size_t i = 0; i < count; ++i)
         picked.push_back(all[i * all.size() / count]);
     return picked;
+}
+
+std::vector<IrradianceEstimate> photonReferenceAt(const Registry& registry, const RayScene& scene,
+                                                  std::span<const VertexSample> samples,
+                                                  std::uint32_t paths) {
+    std::vector<glm::vec3> xs, ns;
+    for (const VertexSample& s : samples) {
+        xs.push_back(s.position);
+        ns.push_back(s.normal);
+    }
+    ReferenceSettings settings;
+    settings.samplesPerPoint = paths;
+    settings.includeEnvironment = false;
+    return IrradianceReference(registry, scene, settings).estimate(xs, ns);
 }
 
 double percentile(std::vector<double> values, double p) {

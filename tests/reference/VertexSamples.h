@@ -1,8 +1,12 @@
 #pragma once
 
+#include "tests/reference/IrradianceEstimate.h"
+
 #include <glm/vec3.hpp>
 
 #include <cstddef>
+#include <cstdint>
+#include <span>
 #include <vector>
 
 namespace qgi {
@@ -28,6 +32,12 @@ bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec
 /// all such vertices in entity order (fewer when the scene has fewer).
 std::vector<VertexSample> openStaticVertices(const Registry& registry, const RayScene& scene,
                                              float r, std::size_t count);
+
+/// The Monte Carlo reference at each sample's position and normal, `paths` paths each, without
+/// sky light (photons are not emitted by the sky, so photon transport has none either).
+std::vector<IrradianceEstimate> photonReferenceAt(const Registry& registry, const RayScene& scene,
+                                                  std::span<const VertexSample> samples,
+                                                  std::uint32_t paths);
 
 /// The p-quantile (0..1) of `values` by the nearest-rank rule; 0 for an empty list.
 double percentile(std::vector<double> values, double p);

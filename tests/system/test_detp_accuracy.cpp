@@ -74,15 +74,7 @@ TEST(DetpAccuracy, CornellPhotonModeAgreesWithMonteCarloReference) {
         sumSquares[i] = squares;
     });
 
-    reference::ReferenceSettings referenceSettings;
-    referenceSettings.samplesPerPoint = 16384;
-    referenceSettings.includeEnvironment = false; // photons are not emitted by the sky
-    std::vector<glm::vec3> xs, ns;
-    for (const VertexSample& sample : samples) {
-        xs.push_back(sample.position);
-        ns.push_back(sample.normal);
-    }
-    const auto expected = reference::IrradianceReference(world, scene, referenceSettings).estimate(xs, ns);
+    const auto expected = reference::photonReferenceAt(world, scene, samples, 16384);
 
     const double discArea = glm::pi<double>() * double(r) * double(r);
     std::vector<double> relative, normalised;
