@@ -3,6 +3,7 @@
 
 #include "components/Material.h"
 #include "components/Mesh.h"
+#include "test_detp_world.h"
 #include "test_meshes.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
@@ -35,15 +36,8 @@ inline Material grey(float albedo) {
 
 inline Entity addMesh(Registry& registry, Mesh mesh, const glm::mat4& world,
                       const Material& material, bool mobile, const char* name) {
-    const Entity e = registry.create();
-    registry.emplace<Name>(e, name);
-    registry.emplace<Mesh>(e, std::move(mesh));
-    registry.emplace<WorldTransform>(e, world);
+    const Entity e = addReceiverMesh(registry, std::move(mesh), world, mobile, name);
     registry.emplace<Material>(e, material);
-    if (mobile)
-        registry.emplace<MobileMesh>(e);
-    else
-        registry.emplace<StaticMesh>(e);
     return e;
 }
 
