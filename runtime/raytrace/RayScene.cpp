@@ -414,4 +414,14 @@ std::optional<Hit> RayScene::intersectMobile(Entity mobile, const glm::mat4& pos
     return hit;
 }
 
+bool RayScene::occludedByMobile(Entity mobile, const Ray& objectRay) const {
+    const auto it = mMobileIndex.find(mobile);
+    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
+               " is not a mobile of the ray scene");
+    RTCIntersectContext context = newContext();
+    RTCRayHit rh = toEmbree(objectRay);
+    rtcOccluded1(mMobiles[it->second].scene.get(), &context, &rh.ray);
+    return rh.ray.tfar < 0.f; // Embree sets tfar to -inf on a hit
+}
+
 } // namespace qgi

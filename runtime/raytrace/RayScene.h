@@ -83,6 +83,11 @@ public:
     /// the rest of the scene is ignored and nothing is changed. `mobile` must be a mobile of
     /// this scene (isMobile). Returns nullopt when the pose is not invertible.
     std::optional<Hit> intersectMobile(Entity mobile, const glm::mat4& pose, const Ray& ray) const;
+    /// Whether `objectRay`, given in `mobile`'s object space, hits the mobile anywhere on
+    /// [tnear, tfar] (the rest of the scene ignored). Cheaper than intersectMobile when only
+    /// the answer counts and the caller already holds the ray in object space (an affine pose
+    /// keeps the ray parameter). `mobile` must be a mobile of this scene.
+    bool occludedByMobile(Entity mobile, const Ray& objectRay) const;
 
     // ---- contents --------------------------------------------------------------------------
     bool isMobile(Entity entity) const { return mMobileIndex.contains(entity); }

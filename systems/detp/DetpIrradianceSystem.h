@@ -110,6 +110,9 @@ private:
     void updateDetp(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
                     bool full);
     void splitDelta(const PhotonStore& store, const PhotonDelta& delta);
+    /// Whether the first segments of `light`'s paths count: not in hybrid mode when the
+    /// renderer draws the light (PhotonLight::directDrawn).
+    bool countsFirst(std::uint16_t light) const;
     /// Whether segment s of a path from `light` counts: not in hybrid mode when it is a
     /// first segment of a light the renderer draws (PhotonLight::directDrawn).
     bool counted(const PhotonSegments& segments, std::size_t s, std::uint16_t light) const;
@@ -160,6 +163,8 @@ private:
     std::vector<std::uint8_t> mSkipsDirect; ///< per store light: its first segments do not count
     std::vector<std::uint32_t> mSegmentList;
     std::vector<std::uint32_t> mCandidatePaths;
+    std::vector<std::uint32_t> mAllPaths; ///< 0, 1, ...: the candidates without a path grid
+    std::vector<std::vector<std::uint32_t>> mChunkLists; ///< per task of estimateMobile
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;
     std::vector<std::uint8_t> mIsTouched; ///< per vertex

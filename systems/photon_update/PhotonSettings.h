@@ -33,10 +33,13 @@ struct PhotonSettings {
     /// fit their old range) exceed this fraction of the live ones.
     float compactionFraction = 0.5f;
     /// A segment that hit a mobile which has only translated since (the common case of an
-    /// object pushed or sliding) is cast again; when it lands on the same triangle at the same
-    /// distance, to within a millionth of the scene's diagonal, the photon reflects exactly as
-    /// it did (same point, normal, albedo and random numbers), so the rest of its path is kept
-    /// up to its next affected segment instead of being re-traced. Off: the seed's rule, every
+    /// object pushed or sliding) is tested again: when the mobile at its new pose still meets
+    /// it first in the same plane at the same distance, to within a millionth of the scene's
+    /// diagonal, and no other moved mobile is in the way (static geometry was not before and
+    /// still is not), the photon reflects exactly as it did (same point, normal, albedo and
+    /// random numbers), so the rest of its path is kept up to its next affected segment
+    /// instead of being re-traced. Only the moved mobiles are traced for this, and not at all
+    /// when the plane hit slid along the segment (a face moving along its normal). Off: the seed's rule, every
     /// affected path re-traced from its first affected segment (bit-identical to a fresh shot).
     bool reuseLandedPaths = true;
     /// Re-shoot every photon every frame (PhotonDelta::full): the baseline to compare against.

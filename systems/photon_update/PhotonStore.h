@@ -23,7 +23,9 @@ struct PhotonSegments {
     std::vector<glm::vec3> power;            ///< W, linear RGB, carried along the segment
     std::vector<Entity> hitEntity;           ///< mesh entity hit; null: left the scene
     std::vector<std::uint32_t> hitPrimitive; ///< triangle index in the entity's Mesh
-    std::vector<std::uint8_t> bounce;        ///< 0: leaves the light; k: after k reflections
+    /// 0: leaves the light; k: after k reflections. In a PhotonStore, segment k of a path
+    /// has bounce k (paths start at their light and are re-traced from a stored segment).
+    std::vector<std::uint8_t> bounce;
 
     /// Bytes one segment occupies across the arrays (the SoA row): 53.
     static constexpr std::size_t kBytesPerSegment = 3 * sizeof(glm::vec3) + sizeof(float) +

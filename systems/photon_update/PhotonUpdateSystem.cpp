@@ -18,6 +18,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -31,9 +32,11 @@ constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 ch
 // reuseLandedPaths: a re-cast segment lands where it did within this fraction of the scene
 // box's diagonal (the rounding of a ray mapped into a translated instance is far below it).
 constexpr float kLandingTolerance = 1e-6f;
+// A segment whose plane slid along it by more than this many tolerances cannot land: it is
+// not cast again (the margin covers the rounding of the slide itself).
+constexpr float kLandingMargin = 4.f;
 // Two triangles of a mobile are one plane when their unit normals differ by less than this.
 constexpr float kFacetTolerance = 1e-5f;
-constexpr std::uint32_t kSettled = std::numeric_limits<std::uint32_t>::max();
 
 glm::vec3 albedoOf(const Material* material) {
     const glm::vec3 albedo = material ? material->baseColor : Material{}.baseColor;
@@ -315,7 +318,9 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
         Mobile& mobile = mMobiles[it->second];
         const glm::mat4& pose = scene.mobilePose(e);
         if (pose == mobile.pose) continue; // also skips an entity listed twice
-        mMoved.push_back({e, pose, glm::inverse(pose), widened(mobile.objectBounds),
+        const glm::mat4 toObject = glm::inverse(pose);
+        mMoved.push_back({e, pose, toObject, glm::transpose(glm::mat3(toObject)),
+                          glm::vec3(pose[3] - mobile.pose[3]), widened(mobile.objectBounds),
                           widened(transformBox(mobile.objectBounds, mobile.pose)),
                           widened(transformBox(mobile.objectBounds, pose)),
                           glm::mat3(pose) == glm::mat3(mobile.pose) ? &mobile : nullptr});
@@ -402,12 +407,14 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
         const float length = segments.length[s];
         // World box, then the tight object-space box (an affine map keeps t), then the
         // mobile's triangles.
-        for (const MovedMobile& m : mMoved)
-            if (segmentMeetsBox(o, d, length, m.newBox) &&
-                segmentMeetsBox(glm::vec3(m.toObject * glm::vec4(o, 1.f)),
-                                glm::mat3(m.toObject) * d, length, m.objectBox) &&
-                scene.intersectMobile(m.entity, m.pose, Ray{o, 0.f, d, length}))
+        for (const MovedMobile& m : mMoved) {
+            if (!segmentMeetsBox(o, d, length, m.newBox)) continue;
+            const Ray local{glm::vec3(m.toObject * glm::vec4(o, 1.f)), 0.f,
+                            glm::mat3(m.toObject) * d, length};
+            if (segmentMeetsBox(local.origin, local.direction, length, m.objectBox) &&
+                scene.occludedByMobile(m.entity, local))
                 return std::int32_t(k);
+        }
     }
     return -1;
 }
@@ -415,66 +422,77 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
 void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonStore& store) {
     const PhotonSegments& segments = store.segments;
     const float tolerance = kLandingTolerance * glm::length(mSceneBox.extent());
-    // The moved mobile a candidate's affected segment hit, when that mobile only translated.
-    const auto translatedMobileHit = [&](std::size_t i) -> const Mobile* {
-        if (mFirstAffected[i] < 0) return nullptr;
-        const Entity hit = segments.hitEntity[store.segmentIndex(mCandidates[i],
-                                                                 std::uint32_t(mFirstAffected[i]))];
-        for (const MovedMobile& m : mMoved)
-            if (hit == m.entity) return m.translated;
+    // The moved mobile that segment s hit, when that mobile only translated and the plane of
+    // the triangle hit slid along the segment by no more than a few times the tolerance: a
+    // translation by `shift` moves the plane with world normal n along a ray of direction d
+    // by (n . shift) / (n . d), so the segment would meet it that much further or nearer.
+    // Null when the segment cannot land as recorded.
+    const auto mayLand = [&](std::size_t s) -> const MovedMobile* {
+        const Entity hit = segments.hitEntity[s];
+        for (const MovedMobile& m : mMoved) {
+            if (hit != m.entity) continue;
+            const std::uint32_t primitive = segments.hitPrimitive[s];
+            if (!m.translated || primitive >= m.translated->facetNormals.size()) return nullptr;
+            const glm::vec3 n = m.normalMatrix * m.translated->facetNormals[primitive];
+            const float slide = glm::dot(n, m.shift), along = glm::dot(n, segments.direction[s]);
+            return std::abs(slide) <= kLandingMargin * tolerance * std::abs(along) ? &m : nullptr;
+        }
         return nullptr;
     };
-    mRecast.clear();
-    for (std::size_t i = 0; i < mCandidates.size(); ++i)
-        if (translatedMobileHit(i)) mRecast.push_back(std::uint32_t(i));
-    std::size_t kept = 0;
-    // Each round casts one segment per listed path; a path with several affected segments on
-    // translated mobiles takes a round for each that lands.
-    while (!mRecast.empty()) {
-        mStats.recastSegments += mRecast.size();
-        mRecastRays.resize(mRecast.size());
-        mRecastHits.resize(mRecast.size());
-        mRecastFix.resize(mRecast.size());
-        for (std::size_t j = 0; j < mRecast.size(); ++j) {
-            const std::size_t i = mRecast[j];
-            const std::size_t s =
-                store.segmentIndex(mCandidates[i], std::uint32_t(mFirstAffected[i]));
-            mRecastRays[j] = Ray{segments.origin[s], 0.f, segments.direction[s],
-                                 std::numeric_limits<float>::infinity()};
+    // Whether segment s, which hit `mobile` at its old pose, lands as recorded at the new one:
+    // the mobile there meets the ray first on the same plane at the same distance (within the
+    // tolerance), and no other moved mobile crosses the segment first. Static geometry and
+    // mobiles that did not move cannot be in the way: they were not before. The triangle now
+    // hit (a neighbour in the same plane, perhaps) goes to `primitive`.
+    const auto lands = [&](std::size_t s, const MovedMobile& mobile, std::uint32_t& primitive) {
+        const glm::vec3& o = segments.origin[s];
+        const glm::vec3& d = segments.direction[s];
+        const float length = segments.length[s];
+        const std::optional<Hit> hit = scene.intersectMobile(
+            mobile.entity, mobile.pose, Ray{o, 0.f, d, std::numeric_limits<float>::infinity()});
+        if (!hit || !(std::abs(hit->t - length) <= tolerance) ||
+            !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
+            return false;
+        for (const MovedMobile& other : mMoved) {
+            if (&other == &mobile || !segmentMeetsBox(o, d, hit->t, other.newBox)) continue;
+            const Ray local{glm::vec3(other.toObject * glm::vec4(o, 1.f)), 0.f,
+                            glm::mat3(other.toObject) * d, hit->t};
+            if (scene.occludedByMobile(other.entity, local)) return false;
         }
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, mRecast.size(), kTestGrain),
-            [&](const tbb::blocked_range<std::size_t>& range) {
-                scene.intersect(std::span(mRecastRays).subspan(range.begin(), range.size()),
-                                std::span(mRecastHits).subspan(range.begin(), range.size()));
-                for (std::size_t j = range.begin(); j < range.end(); ++j) {
-                    const std::size_t i = mRecast[j];
+        primitive = hit->primitive;
+        return true;
+    };
+
+    for (auto& list : mThreadRelabels)
+        list.clear();
+    std::atomic<std::size_t> kept = 0, checked = 0;
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+            std::vector<Relabel>& relabels = mThreadRelabels.local();
+            std::size_t rangeKept = 0, rangeChecked = 0;
+            for (std::size_t i = range.begin(); i < range.end(); ++i) {
+                // One affected segment after another, while each lands where it did.
+                while (mFirstAffected[i] >= 0) {
                     const std::uint32_t k = std::uint32_t(mFirstAffected[i]);
                     const std::size_t s = store.segmentIndex(mCandidates[i], k);
-                    const std::optional<Hit>& hit = mRecastHits[j];
-                    mRecastFix[j] = {s, segments.hitPrimitive[s]};
-                    if (!hit || hit->entity != segments.hitEntity[s] ||
-                        !(std::abs(hit->t - segments.length[s]) <= tolerance) ||
-                        !translatedMobileHit(i)->sameFacet(hit->primitive,
-                                                            segments.hitPrimitive[s])) {
-                        mRecast[j] = kSettled; // re-traced from segment k
-                        continue;
-                    }
-                    // Landed at the same point of the same plane, perhaps on a neighbouring
-                    // triangle of it: the record takes the triangle now there.
-                    mRecastFix[j].primitive = hit->primitive;
+                    const MovedMobile* mobile = mayLand(s);
+                    std::uint32_t primitive = 0;
+                    if (!mobile) break;
+                    ++rangeChecked;
+                    if (!lands(s, *mobile, primitive)) break; // re-traced from segment k
+                    if (primitive != segments.hitPrimitive[s]) relabels.push_back({s, primitive});
                     mFirstAffected[i] = nextAffected(scene, store, mCandidates[i], k + 1);
+                    rangeKept += mFirstAffected[i] < 0 ? 1 : 0;
                 }
-            });
-        for (std::size_t j = 0; j < mRecast.size(); ++j)
-            if (mRecast[j] != kSettled && mRecastFix[j].primitive != segments.hitPrimitive[mRecastFix[j].segment])
-                mRelabels.push_back(mRecastFix[j]);
-        for (const std::uint32_t i : mRecast)
-            kept += i != kSettled && mFirstAffected[i] < 0 ? 1 : 0;
-        std::erase_if(mRecast,
-                      [&](std::uint32_t i) { return i == kSettled || !translatedMobileHit(i); });
-    }
+            }
+            kept += rangeKept;
+            checked += rangeChecked;
+        });
+    for (const auto& list : mThreadRelabels)
+        mRelabels.insert(mRelabels.end(), list.begin(), list.end());
     mStats.landedPaths = kept;
+    mStats.recastSegments = checked;
 }
 
 void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta) {

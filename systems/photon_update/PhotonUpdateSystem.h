@@ -10,6 +10,7 @@
 #include "systems/photon_update/PhotonTracer.h"
 
 #include <glm/mat4x4.hpp>
+#include <oneapi/tbb/enumerable_thread_specific.h>
 
 #include <cstdint>
 #include <optional>
@@ -60,7 +61,7 @@ public:
         std::size_t candidatePaths = 0; ///< from the grid, before the exact test
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
-        std::size_t recastSegments = 0; ///< segments cast again to see whether they landed
+        std::size_t recastSegments = 0; ///< segments tested again to see whether they landed
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
@@ -99,6 +100,9 @@ private:
         Entity entity;
         glm::mat4 pose{1.f};     ///< new pose
         glm::mat4 toObject{1.f}; ///< its inverse
+        /// Object-space normals to world space (not normalised: only signs and ratios count).
+        glm::mat3 normalMatrix{1.f};
+        glm::vec3 shift{0.f}; ///< new minus old translation
         Aabb objectBox;          ///< object-space bounds, slightly widened
         Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
         /// The mobile, when the linear part of its pose is unchanged (it only translated);
@@ -131,9 +135,10 @@ private:
     /// crosses one at its new pose; -1 when there is none.
     std::int32_t nextAffected(const RayScene& scene, const PhotonStore& store, std::uint32_t p,
                               std::uint32_t from) const;
-    /// reuseLandedPaths: casts again the affected segments that hit a mobile which only
-    /// translated; where one lands as recorded, moves on to the path's next affected segment
-    /// (-1 when none is left). Rounds until every entry of mFirstAffected is settled.
+    /// reuseLandedPaths: tests again, against the moved mobiles alone, each affected segment
+    /// that hit a mobile which only translated; where it lands as recorded, moves on to the
+    /// path's next affected segment (-1 when none is left), until every entry of
+    /// mFirstAffected is settled.
     void skipLandedSegments(const RayScene& scene, const PhotonStore& store);
     void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
     void compact(PhotonStore& store);
@@ -159,11 +164,8 @@ private:
     std::vector<Aabb> mQueryBoxes;
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::int32_t> mFirstAffected;
-    std::vector<std::uint32_t> mRecast; ///< candidates whose affected segment is cast again
-    std::vector<Relabel> mRecastFix; ///< per recast segment: the triangle it lands on
     std::vector<Relabel> mRelabels;
-    std::vector<Ray> mRecastRays;
-    std::vector<std::optional<Hit>> mRecastHits;
+    tbb::enumerable_thread_specific<std::vector<Relabel>> mThreadRelabels;
     std::vector<Job> mJobs;
     std::vector<std::uint32_t> mEnds;
     std::vector<std::uint64_t> mWrite;      ///< per job: where its path goes in the store

@@ -216,13 +216,14 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
-    double retraced = 0, landed = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
+    double retraced = 0, landed = 0, recast = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
            detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
         retraced += double(stats.retracedPaths);
         landed += double(stats.landedPaths);
+        recast += double(stats.recastSegments);
         candidates += double(stats.candidatePaths);
         segments += double(stats.tracedSegments);
         find += stats.findMs;
@@ -236,6 +237,7 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
     state.counters["landed/frame"] = landed / frames;
+    state.counters["recast/frame"] = recast / frames;
     state.counters["find_ms"] = find / frames;
     state.counters["trace_ms"] = trace / frames;
     state.counters["grid_ms"] = grid / frames;
