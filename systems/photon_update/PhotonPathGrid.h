@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/core/LargeArray.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/vec3.hpp>
@@ -72,7 +73,7 @@ private:
         std::uint32_t first = 0, end = 0;
         std::uint32_t changed = 0; ///< of its paths, how many are marked changed
         std::vector<std::uint32_t> offsets;
-        std::vector<std::uint32_t> ids;
+        LargeArray<std::uint32_t> ids;
     };
     /// One thread's scratch for walking paths.
     struct Marks {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include "runtime/core/LargeArray.h"
 #include "runtime/ecs/Entity.h"
 #include "runtime/scene/SceneInfo.h"
 
@@ -17,15 +18,15 @@ namespace qgi {
 /// A segment that leaves the scene has length = +inf and a null hitEntity: DETP counts rays
 /// that cross a disc and hit nothing, so those are stored too.
 struct PhotonSegments {
-    std::vector<glm::vec3> origin;           ///< metres, world space
-    std::vector<glm::vec3> direction;        ///< unit, world space
-    std::vector<float> length;               ///< metres to the hit; +inf: left the scene
-    std::vector<glm::vec3> power;            ///< W, linear RGB, carried along the segment
-    std::vector<Entity> hitEntity;           ///< mesh entity hit; null: left the scene
-    std::vector<std::uint32_t> hitPrimitive; ///< triangle index in the entity's Mesh
+    LargeArray<glm::vec3> origin;           ///< metres, world space
+    LargeArray<glm::vec3> direction;        ///< unit, world space
+    LargeArray<float> length;               ///< metres to the hit; +inf: left the scene
+    LargeArray<glm::vec3> power;            ///< W, linear RGB, carried along the segment
+    LargeArray<Entity> hitEntity;           ///< mesh entity hit; null: left the scene
+    LargeArray<std::uint32_t> hitPrimitive; ///< triangle index in the entity's Mesh
     /// 0: leaves the light; k: after k reflections. In a PhotonStore, segment k of a path
     /// has bounce k (paths start at their light and are re-traced from a stored segment).
-    std::vector<std::uint8_t> bounce;
+    LargeArray<std::uint8_t> bounce;
 
     /// Bytes one segment occupies across the arrays (the SoA row): 53.
     static constexpr std::size_t kBytesPerSegment = 3 * sizeof(glm::vec3) + sizeof(float) +
@@ -69,7 +70,7 @@ struct PhotonLight {
  *  Written by PhotonUpdateSystem only; everything else reads it.                         */
 struct PhotonStore {
     PhotonSegments segments;
-    std::vector<PhotonPath> paths; ///< one per emitted photon, index = photon index
+    LargeArray<PhotonPath> paths; ///< one per emitted photon, index = photon index
     std::vector<PhotonLight> lights;
     glm::vec3 emittedPower{0.f};  ///< sum of lights[].power, W
     std::uint64_t generation = 0; ///< bumped whenever the whole set is re-shot

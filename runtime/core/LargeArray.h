@@ -1,0 +1,57 @@
+#pragma once
+
+#include <cstddef>
+#include <cstdlib>
+#include <new>
+#include <vector>
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+namespace qgi {
+
+/** An allocator for arrays of hundreds of megabytes that are read at random (the photon store,
+ *  its paths, the path grid): a block of 2 MiB or more is aligned to 2 MiB and, on Linux,
+ *  advised to use transparent huge pages, so a random read costs one TLB entry per 2 MiB
+ *  instead of one per 4 KiB. Where the kernel offers no huge pages the advice is ignored and
+ *  nothing changes. Smaller blocks come from operator new as usual. */
+template <typename T>
+struct LargeArrayAllocator {
+    using value_type = T;
+    static constexpr std::size_t kHugePage = std::size_t(2) << 20;
+
+    LargeArrayAllocator() noexcept = default;
+    template <typename U>
+    LargeArrayAllocator(const LargeArrayAllocator<U>&) noexcept {}
+
+    T* allocate(std::size_t n) {
+        if (n > std::size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
+        const std::size_t bytes = n * sizeof(T);
+        if (bytes < kHugePage) return static_cast<T*>(::operator new(bytes));
+        const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+        void* p = std::aligned_alloc(kHugePage, rounded);
+        if (!p) throw std::bad_alloc();
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+        madvise(p, rounded, MADV_HUGEPAGE); // advice only: a refusal changes nothing
+#endif
+        return static_cast<T*>(p);
+    }
+    void deallocate(T* p, std::size_t n) noexcept {
+        if (n * sizeof(T) < kHugePage)
+            ::operator delete(p);
+        else
+            std::free(p);
+    }
+};
+
+template <typename T, typename U>
+bool operator==(const LargeArrayAllocator<T>&, const LargeArrayAllocator<U>&) noexcept {
+    return true;
+}
+
+/// A std::vector in LargeArrayAllocator memory.
+template <typename T>
+using LargeArray = std::vector<T, LargeArrayAllocator<T>>;
+
+} // namespace qgi
