@@ -225,8 +225,8 @@ void DetpIrradianceSystem::estimateMobile(const Registry& registry, const Photon
     tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
         std::vector<std::uint32_t>& list = mChunkLists[c];
         list.clear();
-        const std::size_t end = std::min(candidates.size(), (c + 1) * kPathGrain);
-        for (std::size_t i = c * kPathGrain; i < end; ++i) {
+        const std::size_t last = std::min(candidates.size(), (c + 1) * kPathGrain);
+        for (std::size_t i = c * kPathGrain; i < last; ++i) {
             const PhotonPath& path = store.paths[candidates[i]];
             for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k)
                 if (segmentMeetsBox(segments.origin[path.first + k],

@@ -502,6 +502,44 @@ TEST(RayScene, IntersectMobileSeesOnlyThatMobileAtTheGivenPose) {
     EXPECT_NEAR(scene.intersect(down)->t, 4.f, 1e-5f);
 }
 
+TEST(RayScene, OccludedByMobileAnswersWhetherIntersectMobileHits) {
+    Registry registry;
+    addMesh(registry, quad(-10, -10, 10, 10), translation(0, 0, 1), Mobility::Static);
+    const Entity crate = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, -2),
+                                 Mobility::Mobile, "crate");
+    RayScene scene;
+    scene.build(registry);
+    // A pose other than the instance's: turned and stretched, so the object-space ray differs
+    // from the world one in origin, direction and length.
+    const glm::mat4 pose = glm::scale(
+        glm::rotate(translation(0.2f, -0.1f, -1.5f), glm::radians(30.f), glm::vec3(0, 1, 1)),
+        glm::vec3(1.f, 2.f, 0.5f));
+    const glm::mat4 toObject = glm::inverse(pose);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> coordinate(-2.f, 2.f), length(0.f, 6.f);
+    std::size_t hits = 0, misses = 0;
+    for (int i = 0; i < 20'000; ++i) {
+        // From anywhere, aimed within about a box size of the crate: hits and near misses.
+        const glm::vec3 origin(coordinate(rng), coordinate(rng), coordinate(rng) + 1.f);
+        const glm::vec3 target = glm::vec3(pose[3]) + 0.5f * glm::vec3(coordinate(rng),
+                                                                     coordinate(rng),
+                                                                     coordinate(rng));
+        if (glm::length(target - origin) < 1e-3f) continue;
+        const glm::vec3 direction = glm::normalize(target - origin);
+        const float tfar = length(rng);
+        const Ray world{origin, 0.f, direction, tfar};
+        const Ray local{glm::vec3(toObject * glm::vec4(origin, 1.f)), 0.f,
+                        glm::mat3(toObject) * direction, tfar};
+        const std::optional<Hit> hit = scene.intersectMobile(crate, pose, world);
+        // Rays that graze an edge within rounding may differ between the two traversals.
+        if (hit && std::abs(hit->t - tfar) < 1e-4f) continue;
+        ASSERT_EQ(scene.occludedByMobile(crate, local), hit.has_value()) << "ray " << i;
+        (hit ? hits : misses) += 1;
+    }
+    EXPECT_GT(hits, 4'000u); // both answers were exercised
+    EXPECT_GT(misses, 4'000u);
+}
+
 // ---- filtered queries ------------------------------------------------------------------------
 
 TEST(RayScene, FiltersSeeEveryCandidateAndCanSkipEntities) {

@@ -1,0 +1,40 @@
+// LargeArray (runtime/core/LargeArray.h): a std::vector whose big blocks are 2 MiB aligned and
+// advised for huge pages. It must behave as a vector on both sides of that threshold.
+#include "runtime/core/LargeArray.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <numeric>
+
+namespace qgi {
+namespace {
+
+TEST(LargeArray, SmallAndLargeBlocksHoldTheirValuesThroughGrowth) {
+    LargeArray<std::uint32_t> values;
+    constexpr std::size_t kBig = (std::size_t(5) << 20) / sizeof(std::uint32_t); // 5 MiB
+    for (std::uint32_t i = 0; i < 1000; ++i) // small blocks
+        values.push_back(i * 3u);
+    values.resize(kBig); // crosses into huge-page blocks, copying the small one
+    std::iota(values.begin() + 1000, values.end(), 3000u);
+    for (std::size_t i = 0; i < values.size(); i += 997)
+        ASSERT_EQ(values[i], i < 1000 ? std::uint32_t(i * 3) : std::uint32_t(3000 + i - 1000));
+    const auto address = reinterpret_cast<std::uintptr_t>(values.data());
+    EXPECT_EQ(address % LargeArrayAllocator<std::uint32_t>::kHugePage, 0u);
+
+    LargeArray<std::uint32_t> copy = values; // copies allocate through the same allocator
+    EXPECT_EQ(copy, values);
+    values.clear();
+    values.shrink_to_fit(); // back below the threshold: freed with the matching call
+    values.push_back(7u);
+    EXPECT_EQ(values.front(), 7u);
+    EXPECT_EQ(copy[kBig - 1], std::uint32_t(3000 + kBig - 1 - 1000));
+}
+
+TEST(LargeArray, AnImpossibleSizeThrowsInsteadOfWrapping) {
+    LargeArrayAllocator<std::uint64_t> allocator;
+    EXPECT_THROW((void)allocator.allocate(std::size_t(-1) / 4), std::bad_array_new_length);
+}
+
+} // namespace
+} // namespace qgi
