@@ -29,6 +29,7 @@ constexpr std::size_t kVertexGrain = 256;
 /// Candidate paths per task when listing the segments that reach a moved mobile's discs.
 constexpr std::size_t kPathGrain = 2048;
 
+
 } // namespace
 
 DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSettings(settings) {
@@ -197,19 +198,24 @@ float DetpIrradianceSystem::crossingTail() const {
     return (kDiscEndTolerance + DiscIndex::kEmbreeSlack) * mRadius;
 }
 
-void DetpIrradianceSystem::estimateMobile(const Registry& registry, const PhotonStore& store,
-                                          std::uint32_t r) {
-    const auto& receiver = mReceivers.receivers()[r];
-    const std::uint32_t first = receiver.firstVertex, end = first + receiver.vertexCount;
-    std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
-    std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
-
-    const Aabb box = discBounds(r);
+void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const PhotonStore& store,
+                                           std::span<const std::uint32_t> mobiles) {
+    if (mobiles.empty()) return;
+    const std::size_t count = mobiles.size();
+    mMobileBoxes.clear();
+    for (const std::uint32_t r : mobiles) {
+        const auto& receiver = mReceivers.receivers()[r];
+        const std::uint32_t first = receiver.firstVertex, end = first + receiver.vertexCount;
+        std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
+        std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
+        mMobileBoxes.push_back(discBounds(r));
+    }
     const float tail = crossingTail();
     const PhotonSegments& segments = store.segments;
+    // One query and one walk for all of them: a path near several mobiles is read once.
     std::span<const std::uint32_t> candidates;
     if (const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>()) {
-        grid->pathsOverlapping(box, mCandidatePaths);
+        grid->pathsOverlapping(mMobileBoxes, mCandidatePaths);
         candidates = mCandidatePaths;
     } else {
         mAllPaths.resize(store.paths.size());
@@ -217,33 +223,43 @@ void DetpIrradianceSystem::estimateMobile(const Registry& registry, const Photon
         candidates = mAllPaths;
     }
     mStats.candidatePaths += candidates.size();
-    // The segments that count and reach the discs' box, in parallel chunks of paths; the
-    // chunks are joined in order, so the list is in increasing path order, as a full estimate
-    // sums them: the same sums, bit for bit. (Segment k of a stored path has bounce k.)
+    // Per mobile, the segments that count and reach its discs' box, in parallel chunks of
+    // paths; the chunks are joined in order, so each list is in increasing path order, as a
+    // full estimate sums them: the same sums, bit for bit. (Segment k of a stored path has
+    // bounce k.) List (chunk c, mobile j) is mChunkLists[c * count + j].
     const std::size_t chunks = (candidates.size() + kPathGrain - 1) / kPathGrain;
-    if (mChunkLists.size() < chunks) mChunkLists.resize(chunks);
+    if (mChunkLists.size() < chunks * count) mChunkLists.resize(chunks * count);
     tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
-        std::vector<std::uint32_t>& list = mChunkLists[c];
-        list.clear();
+        const std::span lists(mChunkLists.data() + c * count, count);
+        for (std::vector<std::uint32_t>& list : lists)
+            list.clear();
         const std::size_t last = std::min(candidates.size(), (c + 1) * kPathGrain);
-        for (std::size_t i = c * kPathGrain; i < last; ++i) {
+        walkPathsPrefetched(store, candidates, c * kPathGrain, last, [&](std::size_t i) {
             const PhotonPath& path = store.paths[candidates[i]];
-            for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k)
-                if (segmentMeetsBox(segments.origin[path.first + k],
-                                    segments.direction[path.first + k],
-                                    segments.length[path.first + k] + tail, box))
-                    list.push_back(path.first + k);
-        }
+            for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k) {
+                const std::uint32_t s = path.first + k;
+                for (std::size_t j = 0; j < count; ++j)
+                    if (segmentMeetsBox(segments.origin[s], segments.direction[s],
+                                        segments.length[s] + tail, mMobileBoxes[j]))
+                        lists[j].push_back(s);
+            }
+        });
     });
-    mSegmentList.clear();
-    for (std::size_t c = 0; c < chunks; ++c)
-        mSegmentList.insert(mSegmentList.end(), mChunkLists[c].begin(), mChunkLists[c].end());
-    mStats.candidateSegments += mSegmentList.size();
-    accumulateDiscs(*mMobileDiscs[r], first, store.segments, mSegmentList, {}, 1.0, false);
 
     const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
-    for (std::uint32_t v = first; v < end; ++v)
-        mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+    for (std::size_t j = 0; j < count; ++j) {
+        mSegmentList.clear();
+        for (std::size_t c = 0; c < chunks; ++c)
+            mSegmentList.insert(mSegmentList.end(), mChunkLists[c * count + j].begin(),
+                                mChunkLists[c * count + j].end());
+        mStats.candidateSegments += mSegmentList.size();
+        const auto& receiver = mReceivers.receivers()[mobiles[j]];
+        accumulateDiscs(*mMobileDiscs[mobiles[j]], receiver.firstVertex, store.segments,
+                        mSegmentList, {}, 1.0, false);
+        for (std::uint32_t v = receiver.firstVertex; v < receiver.firstVertex + receiver.vertexCount;
+             ++v)
+            mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+    }
 }
 
 void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelta& delta) {
@@ -307,8 +323,10 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
         for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
             mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+        mAllMobiles.clear();
         for (std::uint32_t r = 0; r < receivers.size(); ++r)
-            if (receivers[r].mobile) estimateMobile(registry, store, r);
+            if (receivers[r].mobile) mAllMobiles.push_back(r);
+        estimateMobiles(registry, store, mAllMobiles);
         publishAll(registry);
         return;
     }
@@ -352,8 +370,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     mStats.verticesWritten = mTouched.size();
     timer.emplace(profiler, "mobiles", mStats.mobileMs);
 
+    estimateMobiles(registry, store, mMoved);
     for (const std::uint32_t r : mMoved) {
-        estimateMobile(registry, store, r);
         mReceivers.publishReceiver(registry, mIrradiance, r);
         mStats.verticesWritten += receivers[r].vertexCount;
     }

@@ -122,7 +122,9 @@ private:
     void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
                          const PhotonSegments& segments, std::span<const std::uint32_t> indices,
                          std::span<const float> beyond, double sign, bool incremental);
-    void estimateMobile(const Registry& registry, const PhotonStore& store, std::uint32_t receiver);
+    /// Re-estimates the listed mobile receivers in full against the current ray set.
+    void estimateMobiles(const Registry& registry, const PhotonStore& store,
+                         std::span<const std::uint32_t> mobiles);
     void updateImpacts(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
                        bool full);
     void updatePhotonMap(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
@@ -164,7 +166,9 @@ private:
     std::vector<std::uint32_t> mSegmentList;
     std::vector<std::uint32_t> mCandidatePaths;
     std::vector<std::uint32_t> mAllPaths; ///< 0, 1, ...: the candidates without a path grid
-    std::vector<std::vector<std::uint32_t>> mChunkLists; ///< per task of estimateMobile
+    std::vector<std::vector<std::uint32_t>> mChunkLists; ///< per task and mobile, estimateMobiles
+    std::vector<Aabb> mMobileBoxes;                      ///< estimateMobiles: per mobile
+    std::vector<std::uint32_t> mAllMobiles;              ///< receiver indices, full estimates
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;
     std::vector<std::uint8_t> mIsTouched; ///< per vertex

@@ -379,10 +379,14 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     // Paths being re-shot anyway are skipped (-1).
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
                       [&](const tbb::blocked_range<std::size_t>& range) {
-                          for (std::size_t i = range.begin(); i < range.end(); ++i)
-                              mFirstAffected[i] = testBit(mReshooting, mCandidates[i])
-                                                      ? -1
-                                                      : nextAffected(scene, store, mCandidates[i], 0);
+                          walkPathsPrefetched(store, mCandidates, range.begin(), range.end(),
+                                              [&](std::size_t i) {
+                                                  mFirstAffected[i] =
+                                                      testBit(mReshooting, mCandidates[i])
+                                                          ? -1
+                                                          : nextAffected(scene, store,
+                                                                         mCandidates[i], 0);
+                                              });
                       });
     if (mSettings.reuseLandedPaths) skipLandedSegments(scene, store);
     for (const Job& job : mJobs)

@@ -223,7 +223,8 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, recast = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
-           detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0;
+           detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0,
+           crossings = 0, deltaSegments = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
@@ -239,6 +240,8 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
         detpMobile += w.irradiance->lastFrame().mobileMs;
         mobilePaths += double(w.irradiance->lastFrame().candidatePaths);
         mobileSegments += double(w.irradiance->lastFrame().candidateSegments);
+        crossings += double(w.irradiance->lastFrame().crossings);
+        deltaSegments += double(w.irradiance->lastFrame().deltaSegments);
     }
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
@@ -252,6 +255,8 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
     state.counters["detp_mobiles_ms"] = detpMobile / frames;
     state.counters["detp_mobile_paths"] = mobilePaths / frames;
     state.counters["detp_mobile_segments"] = mobileSegments / frames;
+    state.counters["detp_crossings"] = crossings / frames;
+    state.counters["detp_delta_segments"] = deltaSegments / frames;
 }
 
 } // namespace
