@@ -15,6 +15,8 @@ namespace {
 
 /// Embree's discs are this much wider than the real ones (see the class comment).
 constexpr float kEmbreeWiden = 1.01f;
+/// Segments ahead whose fields traceChunk requests before it needs them.
+constexpr std::size_t kPrefetchAhead = 8;
 
 bool isFinite(const glm::vec3& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
@@ -129,6 +131,14 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
     const float tail = kDiscEndTolerance * mRadius + 2.f * slack;
 
     for (std::size_t k = begin; k < end; ++k) {
+        // The indices may point anywhere in a large store (a moved mobile's segments): ask
+        // for a later segment's fields ahead of use.
+        if (k + kPrefetchAhead < end) {
+            const std::uint32_t ahead = query.indices[k + kPrefetchAhead];
+            __builtin_prefetch(&segments.origin[ahead]);
+            __builtin_prefetch(&segments.direction[ahead]);
+            __builtin_prefetch(&segments.length[ahead]);
+        }
         const std::uint32_t s = query.indices[k];
         const glm::vec3& d = segments.direction[s];
         const glm::vec3 origin = segments.origin[s] - slack * d;

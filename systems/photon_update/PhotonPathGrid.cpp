@@ -326,21 +326,33 @@ void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
     // Chunks cover whole words of mSeen: one task per chunk, no two write the same word.
     // Isolated: while it waits, this thread (holding the lock) must not pick up an outer
     // task that queries again.
+    // The ranges of cells to read in every chunk: a row along x (consecutive cells) per (y, z)
+    // of each query box, and the side cells it reaches; merged, so that a cell two boxes share
+    // (a mobile's old and new boxes share nearly all) is read once.
+    mRanges.clear();
+    for (const Query& q : mQueries) {
+        for (int z = q.lo.z; z <= q.hi.z; ++z)
+            for (int y = q.lo.y; y <= q.hi.y; ++y)
+                mRanges.push_back({cellIndex({q.lo.x, y, z}), cellIndex({q.hi.x, y, z}) + 1});
+        for (int side = 0; side < int(kSideCells); ++side)
+            if (q.outside & (1u << side))
+                mRanges.push_back({outsideCell() + side, outsideCell() + side + 1});
+    }
+    std::sort(mRanges.begin(), mRanges.end());
+    std::size_t merged = 0;
+    for (const auto& range : mRanges) {
+        if (merged > 0 && range.first <= mRanges[merged - 1].second)
+            mRanges[merged - 1].second = std::max(mRanges[merged - 1].second, range.second);
+        else
+            mRanges[merged++] = range;
+    }
+    mRanges.resize(merged);
     tbb::this_task_arena::isolate([&] {
         tbb::parallel_for(std::size_t(0), mChunks.size(), [&](std::size_t k) {
             const Chunk& chunk = mChunks[k];
-            const auto seeRange = [&](std::uint32_t firstCell, std::uint32_t endCell) {
-                for (std::uint32_t e = chunk.offsets[firstCell]; e < chunk.offsets[endCell]; ++e)
+            for (const auto& [first, end] : mRanges)
+                for (std::uint32_t e = chunk.offsets[first]; e < chunk.offsets[end]; ++e)
                     see(chunk.ids[e]);
-            };
-            for (const Query& q : mQueries) {
-                for (int z = q.lo.z; z <= q.hi.z; ++z) // cells along x are consecutive: a row
-                    for (int y = q.lo.y; y <= q.hi.y; ++y)
-                        seeRange(cellIndex({q.lo.x, y, z}), cellIndex({q.hi.x, y, z}) + 1);
-                for (int side = 0; side < int(kSideCells); ++side)
-                    if (q.outside & (1u << side))
-                        seeRange(outsideCell() + side, outsideCell() + side + 1);
-            }
         });
     });
     for (std::size_t i = 0; i < mChanged.size(); ++i)

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <mutex>
 #include <span>
+#include <utility>
 #include <vector>
 
 namespace qgi {
@@ -134,6 +135,8 @@ private:
     mutable tbb::enumerable_thread_specific<Marks> mMarks;
     mutable std::mutex mQueryMutex;
     mutable std::vector<std::uint64_t> mSeen; ///< one bit per path, clear between queries
+    /// A query's ranges of cells [first, end), merged; the same in every chunk.
+    mutable std::vector<std::pair<std::uint32_t, std::uint32_t>> mRanges;
     mutable std::vector<Query> mQueries;
 };
 
