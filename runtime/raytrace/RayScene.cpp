@@ -391,17 +391,22 @@ bool RayScene::occludedWithFilter(const Ray& ray, AcceptFn accept, void* user) c
 
 std::optional<Hit> RayScene::intersectMobile(Entity mobile, const glm::mat4& pose,
                                              const Ray& ray) const {
-    const auto it = mMobileIndex.find(mobile);
-    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
-               " is not a mobile of the ray scene");
     if (!isInvertible(pose)) return std::nullopt;
     // An affine map keeps the ray parameter: trace the object-space ray, keep t as it is.
     const glm::mat4 toObject = glm::inverse(pose);
     Ray local = ray;
     local.origin = glm::vec3(toObject * glm::vec4(ray.origin, 1.f));
     local.direction = glm::mat3(toObject) * ray.direction;
+    return intersectMobileLocal(mobile, toObject, local);
+}
+
+std::optional<Hit> RayScene::intersectMobileLocal(Entity mobile, const glm::mat4& toObject,
+                                                  const Ray& objectRay) const {
+    const auto it = mMobileIndex.find(mobile);
+    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
+               " is not a mobile of the ray scene");
     RTCIntersectContext context = newContext();
-    RTCRayHit rh = toEmbree(local);
+    RTCRayHit rh = toEmbree(objectRay);
     rtcIntersect1(mMobiles[it->second].scene.get(), &context, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return std::nullopt;
     Hit hit;

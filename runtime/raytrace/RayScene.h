@@ -83,6 +83,11 @@ public:
     /// the rest of the scene is ignored and nothing is changed. `mobile` must be a mobile of
     /// this scene (isMobile). Returns nullopt when the pose is not invertible.
     std::optional<Hit> intersectMobile(Entity mobile, const glm::mat4& pose, const Ray& ray) const;
+    /// intersectMobile for a ray already in `mobile`'s object space, with the pose's inverse
+    /// `toObject` (world to object; it turns the normal back to world space): for callers
+    /// that test many rays against one pose and compute the inverse once.
+    std::optional<Hit> intersectMobileLocal(Entity mobile, const glm::mat4& toObject,
+                                            const Ray& objectRay) const;
     /// Whether `objectRay`, given in `mobile`'s object space, hits the mobile anywhere on
     /// [tnear, tfar] (the rest of the scene ignored). Cheaper than intersectMobile when only
     /// the answer counts and the caller already holds the ray in object space (an affine pose

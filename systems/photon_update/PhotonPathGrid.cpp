@@ -323,9 +323,6 @@ void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
         q.lo = cellOf(q.wide.min);
         q.hi = cellOf(q.wide.max);
     }
-    // Chunks cover whole words of mSeen: one task per chunk, no two write the same word.
-    // Isolated: while it waits, this thread (holding the lock) must not pick up an outer
-    // task that queries again.
     // The ranges of cells to read in every chunk: a row along x (consecutive cells) per (y, z)
     // of each query box, and the side cells it reaches; merged, so that a cell two boxes share
     // (a mobile's old and new boxes share nearly all) is read once.
@@ -347,6 +344,9 @@ void PhotonPathGrid::pathsOverlapping(std::span<const Aabb> boxes,
             mRanges[merged++] = range;
     }
     mRanges.resize(merged);
+    // Chunks cover whole words of mSeen: one task per chunk, no two write the same word.
+    // Isolated: while it waits, this thread (holding the lock) must not pick up an outer
+    // task that queries again.
     tbb::this_task_arena::isolate([&] {
         tbb::parallel_for(std::size_t(0), mChunks.size(), [&](std::size_t k) {
             const Chunk& chunk = mChunks[k];

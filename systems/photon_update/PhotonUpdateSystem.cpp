@@ -29,11 +29,12 @@ constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); //
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
 constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 changed paths
-// reuseLandedPaths: a re-cast segment lands where it did within this fraction of the scene
-// box's diagonal (the rounding of a ray mapped into a translated instance is far below it).
+// reuseLandedPaths: a segment tested again lands where it did within this fraction of the
+// scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
+// it).
 constexpr float kLandingTolerance = 1e-6f;
 // A segment whose plane slid along it by more than this many tolerances cannot land: it is
-// not cast again (the margin covers the rounding of the slide itself).
+// not tested again (the margin covers the rounding of the slide itself).
 constexpr float kLandingMargin = 4.f;
 // Two triangles of a mobile are one plane when their unit normals differ by less than this.
 constexpr float kFacetTolerance = 1e-5f;
@@ -413,8 +414,7 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
         // mobile's triangles.
         for (const MovedMobile& m : mMoved) {
             if (!segmentMeetsBox(o, d, length, m.newBox)) continue;
-            const Ray local{glm::vec3(m.toObject * glm::vec4(o, 1.f)), 0.f,
-                            glm::mat3(m.toObject) * d, length};
+            const Ray local = m.toLocal(o, d, length);
             if (segmentMeetsBox(local.origin, local.direction, length, m.objectBox) &&
                 scene.occludedByMobile(m.entity, local))
                 return std::int32_t(k);
@@ -452,16 +452,15 @@ void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonS
         const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
         const float length = segments.length[s];
-        const std::optional<Hit> hit = scene.intersectMobile(
-            mobile.entity, mobile.pose, Ray{o, 0.f, d, std::numeric_limits<float>::infinity()});
+        const std::optional<Hit> hit = scene.intersectMobileLocal(
+            mobile.entity, mobile.toObject,
+            mobile.toLocal(o, d, std::numeric_limits<float>::infinity()));
         if (!hit || !(std::abs(hit->t - length) <= tolerance) ||
             !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
             return false;
         for (const MovedMobile& other : mMoved) {
             if (&other == &mobile || !segmentMeetsBox(o, d, hit->t, other.newBox)) continue;
-            const Ray local{glm::vec3(other.toObject * glm::vec4(o, 1.f)), 0.f,
-                            glm::mat3(other.toObject) * d, hit->t};
-            if (scene.occludedByMobile(other.entity, local)) return false;
+            if (scene.occludedByMobile(other.entity, other.toLocal(o, d, hit->t))) return false;
         }
         primitive = hit->primitive;
         return true;
@@ -496,7 +495,7 @@ void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonS
     for (const auto& list : mThreadRelabels)
         mRelabels.insert(mRelabels.end(), list.begin(), list.end());
     mStats.landedPaths = kept;
-    mStats.recastSegments = checked;
+    mStats.retestedSegments = checked;
 }
 
 void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta) {

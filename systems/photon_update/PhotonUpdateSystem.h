@@ -61,7 +61,7 @@ public:
         std::size_t candidatePaths = 0; ///< from the grid, before the exact test
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
-        std::size_t recastSegments = 0; ///< segments tested again to see whether they landed
+        std::size_t retestedSegments = 0; ///< segments tested again: did they land?
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
@@ -108,6 +108,12 @@ private:
         /// The mobile, when the linear part of its pose is unchanged (it only translated);
         /// null otherwise. Points into mMobiles, which does not change between full shots.
         const Mobile* translated = nullptr;
+        /// The world segment origin + t direction, t in [0, length], in object space (an
+        /// affine map keeps t).
+        Ray toLocal(const glm::vec3& origin, const glm::vec3& direction, float length) const {
+            return {glm::vec3(toObject * glm::vec4(origin, 1.f)), 0.f,
+                    glm::mat3(toObject) * direction, length};
+        }
     };
     struct Sweep {
         std::uint32_t remaining = 0; ///< photons left to re-shoot since the light last changed

@@ -222,7 +222,7 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
-    double retraced = 0, landed = 0, recast = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
+    double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
            detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0,
            crossings = 0, deltaSegments = 0;
     for (auto _ : state) {
@@ -230,7 +230,7 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
         retraced += double(stats.retracedPaths);
         landed += double(stats.landedPaths);
-        recast += double(stats.recastSegments);
+        retested += double(stats.retestedSegments);
         candidates += double(stats.candidatePaths);
         segments += double(stats.tracedSegments);
         find += stats.findMs;
@@ -246,7 +246,7 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
     reportFrames(state, w, retraced, candidates, segments);
     const double frames = double(state.iterations());
     state.counters["landed/frame"] = landed / frames;
-    state.counters["recast/frame"] = recast / frames;
+    state.counters["retested/frame"] = retested / frames;
     state.counters["find_ms"] = find / frames;
     state.counters["trace_ms"] = trace / frames;
     state.counters["grid_ms"] = grid / frames;
