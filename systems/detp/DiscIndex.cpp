@@ -4,11 +4,18 @@
 #include "runtime/raytrace/EmbreeDevice.h"
 #include "systems/photon_update/PhotonStore.h"
 
+#include <glm/common.hpp>
+
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <tuple>
 
 namespace qgi {
 namespace {
@@ -17,12 +24,45 @@ namespace {
 constexpr float kEmbreeWiden = 1.01f;
 /// Segments ahead whose fields traceChunk requests before it needs them.
 constexpr std::size_t kPrefetchAhead = 8;
-
+/// A plane's rectangles overlap their neighbours by this fraction of a cell, so that a
+/// crossing on a shared edge meets at least one of them whatever Embree's rounding.
+constexpr float kRectangleOverlap = 0.01f;
+/// A plane becomes a patch only while its grid has at most this many cells per disc (plus
+/// kGridCellsSpare): discs strewn thinly over a large plane stay points.
+constexpr std::size_t kGridCellsPerDisc = 64;
+constexpr std::size_t kGridCellsSpare = 4096;
 bool isFinite(const glm::vec3& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
 
+/// The axis a normal lies along exactly (one component is +-1, the others zero), or -1.
+int exactAxis(const glm::vec3& n) {
+    for (int a = 0; a < 3; ++a)
+        if ((n[a] == 1.f || n[a] == -1.f) && n[(a + 1) % 3] == 0.f && n[(a + 2) % 3] == 0.f)
+            return a;
+    return -1;
+}
+
+std::uint32_t bitsOf(float f) {
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    return bits;
+}
+
 } // namespace
+
+void DiscIndex::updateBox() {
+    // Every disc with its widening, and the slack of Embree's segments, well inside; rounding
+    // of the box itself (a few ulps of the largest coordinate) far inside the pad.
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+    for (const glm::vec3& c : mCenters) {
+        lo = glm::min(lo, glm::dvec3(c));
+        hi = glm::max(hi, glm::dvec3(c));
+    }
+    const glm::dvec3 pad = glm::dvec3(2.0 * mRadius) + 1e-5 * (glm::abs(lo) + glm::abs(hi));
+    mBoxMin = lo - pad;
+    mBoxMax = hi + pad;
+}
 
 struct DiscIndex::QueryContext {
     RTCIntersectContext embree; // first: Embree hands the filter a pointer to it
@@ -34,7 +74,164 @@ struct DiscIndex::QueryContext {
     std::vector<std::uint64_t>* pairs = nullptr; // the chunk's output
 };
 
+struct DiscIndex::Layout {
+    std::vector<std::uint32_t> pointIds;
+    std::vector<Plane> planes;
+    std::vector<std::uint32_t> cellStart{0};
+    std::vector<std::uint32_t> cellDiscs;
+    std::vector<glm::vec3> cellCenters;
+    std::vector<std::uint32_t> quadPlane;
+    std::vector<glm::vec4> quadCorners;
+    std::vector<glm::uvec4> quadIndices;
+};
+
 DiscIndex::DiscIndex(EmbreeDevice& device, Motion motion) : mDevice(device), mMotion(motion) {}
+
+void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
+                                std::span<const glm::vec3> normals, float radius, Layout& out) {
+    // Group the discs of exactly axis-aligned normal by (normal, coordinate along the axis),
+    // bit for bit; the sort keeps the groups, and the discs in them, in a fixed order.
+    struct Keyed {
+        std::array<std::uint32_t, 4> key; // normal's bits, coordinate's bits
+        std::uint32_t disc;
+        bool operator<(const Keyed& o) const { return std::tie(key, disc) < std::tie(o.key, o.disc); }
+    };
+    std::vector<Keyed> keyed;
+    std::vector<std::uint8_t> planar(centers.size(), 0);
+    for (std::uint32_t i = 0; i < centers.size(); ++i) {
+        const int axis = exactAxis(normals[i]);
+        if (axis < 0) continue;
+        keyed.push_back({{bitsOf(normals[i].x), bitsOf(normals[i].y), bitsOf(normals[i].z),
+                          bitsOf(centers[i][axis])},
+                         i});
+    }
+    std::sort(keyed.begin(), keyed.end());
+
+    const float cell = kPlaneCellRadii * radius;
+    const float overlap = kRectangleOverlap * cell;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> cellOf; // (cell, disc)
+    std::vector<std::uint8_t> active;
+    for (std::size_t first = 0; first < keyed.size();) {
+        std::size_t last = first;
+        while (last < keyed.size() && keyed[last].key == keyed[first].key)
+            ++last;
+        const std::span<const Keyed> group(keyed.data() + first, last - first);
+        first = last;
+        if (group.size() < kMinPlaneDiscs) continue;
+
+        Plane plane;
+        const glm::vec3 normal = normals[group[0].disc];
+        plane.axis = std::uint8_t(exactAxis(normal));
+        plane.u = std::uint8_t((plane.axis + 1) % 3);
+        plane.v = std::uint8_t((plane.axis + 2) % 3);
+        plane.normal = normal;
+        plane.coordinate = centers[group[0].disc][plane.axis];
+        glm::vec2 lo(std::numeric_limits<float>::max()), hi(std::numeric_limits<float>::lowest());
+        for (const Keyed& k : group) {
+            const glm::vec2 uv(centers[k.disc][plane.u], centers[k.disc][plane.v]);
+            lo = glm::min(lo, uv);
+            hi = glm::max(hi, uv);
+        }
+        // One empty cell all around: the 3 x 3 neighbourhood of a disc's cell is in the grid.
+        const double columns = std::floor(double(hi.x - lo.x) / cell) + 3.0;
+        const double rows = std::floor(double(hi.y - lo.y) / cell) + 3.0;
+        if (!(columns * rows <= double(kGridCellsPerDisc * group.size() + kGridCellsSpare)))
+            continue;
+        plane.columns = std::uint32_t(columns);
+        plane.rows = std::uint32_t(rows);
+        plane.corner = lo - glm::vec2(cell);
+        plane.firstCell = std::uint32_t(out.cellStart.size() - 1);
+
+        const auto cellIndex = [&](const glm::vec3& c) {
+            const auto column = std::uint32_t(std::clamp(
+                std::floor((c[plane.u] - plane.corner.x) / cell), 1.f, float(plane.columns - 2)));
+            const auto row = std::uint32_t(std::clamp(
+                std::floor((c[plane.v] - plane.corner.y) / cell), 1.f, float(plane.rows - 2)));
+            return row * plane.columns + column;
+        };
+        cellOf.clear();
+        for (const Keyed& k : group)
+            cellOf.emplace_back(cellIndex(centers[k.disc]), k.disc);
+        std::sort(cellOf.begin(), cellOf.end());
+        const std::size_t cells = std::size_t(plane.columns) * plane.rows;
+        std::size_t next = 0;
+        active.assign(cells, 0);
+        for (std::uint32_t c = 0; c < cells; ++c) {
+            for (; next < cellOf.size() && cellOf[next].first == c; ++next) {
+                out.cellDiscs.push_back(cellOf[next].second);
+                out.cellCenters.push_back(centers[cellOf[next].second]);
+                planar[cellOf[next].second] = 1;
+            }
+            out.cellStart.push_back(std::uint32_t(out.cellDiscs.size()));
+        }
+        // Cells within one of a non-empty cell: wherever a segment can cross within a radius
+        // of one of the plane's discs.
+        for (std::uint32_t row = 1; row + 1 < plane.rows; ++row)
+            for (std::uint32_t column = 1; column + 1 < plane.columns; ++column) {
+                const std::size_t c = std::size_t(row) * plane.columns + column;
+                if (out.cellStart[plane.firstCell + c] == out.cellStart[plane.firstCell + c + 1])
+                    continue;
+                for (std::uint32_t r = row - 1; r <= row + 1; ++r)
+                    for (std::uint32_t q = column - 1; q <= column + 1; ++q)
+                        active[std::size_t(r) * plane.columns + q] = 1;
+            }
+        // Rectangles: runs of active cells along each row, merged with the run of the same
+        // columns in the row below.
+        struct Run {
+            std::uint32_t first, last, quad;
+        };
+        std::vector<Run> above, here;
+        const auto corner = [&](float u, float v) {
+            glm::vec4 p(0.f);
+            p[plane.axis] = plane.coordinate;
+            p[plane.u] = u;
+            p[plane.v] = v;
+            return p;
+        };
+        const auto planeIndex = std::uint32_t(out.planes.size());
+        for (std::uint32_t row = 0; row < plane.rows; ++row) {
+            here.clear();
+            for (std::uint32_t column = 0; column < plane.columns;) {
+                if (!active[std::size_t(row) * plane.columns + column]) {
+                    ++column;
+                    continue;
+                }
+                Run run{column, column, 0};
+                while (run.last + 1 < plane.columns &&
+                       active[std::size_t(row) * plane.columns + run.last + 1])
+                    ++run.last;
+                column = run.last + 1;
+                const float v1 = plane.corner.y + float(row + 1) * cell + overlap;
+                const auto same = std::find_if(above.begin(), above.end(), [&](const Run& a) {
+                    return a.first == run.first && a.last == run.last;
+                });
+                if (same != above.end()) { // extend the rectangle one row down
+                    run.quad = same->quad;
+                    glm::vec4* q = &out.quadCorners[4 * std::size_t(run.quad)];
+                    q[2][plane.v] = v1;
+                    q[3][plane.v] = v1;
+                } else {
+                    run.quad = std::uint32_t(out.quadPlane.size());
+                    const float u0 = plane.corner.x + float(run.first) * cell - overlap;
+                    const float u1 = plane.corner.x + float(run.last + 1) * cell + overlap;
+                    const float v0 = plane.corner.y + float(row) * cell - overlap;
+                    const auto base = std::uint32_t(out.quadCorners.size());
+                    out.quadCorners.push_back(corner(u0, v0));
+                    out.quadCorners.push_back(corner(u1, v0));
+                    out.quadCorners.push_back(corner(u1, v1));
+                    out.quadCorners.push_back(corner(u0, v1));
+                    out.quadIndices.emplace_back(base, base + 1, base + 2, base + 3);
+                    out.quadPlane.push_back(planeIndex);
+                }
+                here.push_back(run);
+            }
+            std::swap(above, here);
+        }
+        out.planes.push_back(plane);
+    }
+    for (std::uint32_t i = 0; i < centers.size(); ++i)
+        if (!planar[i]) out.pointIds.push_back(i);
+}
 
 void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
                       float radius) {
@@ -45,6 +242,14 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
         if (!isFinite(centers[i]) || !isFinite(normals[i]))
             fail("DiscIndex: disc ", i, " has a non-finite centre or normal");
 
+    Layout layout;
+    if (mMotion == Motion::Static) {
+        splitIntoPlanes(centers, normals, radius, layout);
+    } else {
+        layout.pointIds.resize(centers.size());
+        std::iota(layout.pointIds.begin(), layout.pointIds.end(), 0u);
+    }
+
     mDevice.takeError(); // earlier errors were logged; this build reports only its own
     const RTCDevice device = mDevice.handle();
     SceneHandle scene(rtcNewScene(device));
@@ -54,67 +259,137 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
 
     // Embree shares these buffers; they are moved into the members only once the build has
     // succeeded (moving a vector keeps its storage), so a failure leaves the old index intact.
-    const std::size_t count = centers.size();
-    std::vector<glm::vec4> discs(count);
-    std::vector<glm::vec3> padded(count + 1, glm::vec3(0.f));
-    for (std::size_t i = 0; i < count; ++i) {
-        discs[i] = glm::vec4(centers[i], radius * kEmbreeWiden);
-        padded[i] = normals[i];
+    const std::size_t points = layout.pointIds.size();
+    std::vector<glm::vec4> discs(points);
+    std::vector<glm::vec3> padded(points + 1, glm::vec3(0.f));
+    for (std::size_t i = 0; i < points; ++i) {
+        discs[i] = glm::vec4(centers[layout.pointIds[i]], radius * kEmbreeWiden);
+        padded[i] = normals[layout.pointIds[i]];
     }
     GeometryHandle geometry;
-    if (count > 0) {
+    if (points > 0) {
         geometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT));
         rtcSetSharedGeometryBuffer(geometry.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
-                                   discs.data(), 0, sizeof(glm::vec4), count);
+                                   discs.data(), 0, sizeof(glm::vec4), points);
         rtcSetSharedGeometryBuffer(geometry.get(), RTC_BUFFER_TYPE_NORMAL, 0, RTC_FORMAT_FLOAT3,
-                                   padded.data(), 0, sizeof(glm::vec3), count);
+                                   padded.data(), 0, sizeof(glm::vec3), points);
         rtcSetGeometryOccludedFilterFunction(geometry.get(), &DiscIndex::recordCrossings);
         rtcCommitGeometry(geometry.get());
         rtcAttachGeometry(scene.get(), geometry.get());
     }
+    GeometryHandle planeGeometry;
+    if (!layout.quadPlane.empty()) {
+        planeGeometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD));
+        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_VERTEX, 0,
+                                   RTC_FORMAT_FLOAT3, layout.quadCorners.data(), 0,
+                                   sizeof(glm::vec4), layout.quadCorners.size());
+        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                                   layout.quadIndices.data(), 0, sizeof(glm::uvec4),
+                                   layout.quadIndices.size());
+        rtcSetGeometryOccludedFilterFunction(planeGeometry.get(), &DiscIndex::recordPlaneCrossings);
+        rtcCommitGeometry(planeGeometry.get());
+        rtcAttachGeometry(scene.get(), planeGeometry.get());
+    }
     rtcCommitScene(scene.get());
     if (const auto error = mDevice.takeError())
-        fail("DiscIndex: Embree failed to build ", count, " discs: ", error->message);
+        fail("DiscIndex: Embree failed to build ", centers.size(), " discs: ", error->message);
     mScene = std::move(scene);
     mGeometry = std::move(geometry);
-    mDiscs = std::move(discs);
-    mNormals = std::move(padded);
+    mPlaneGeometry = std::move(planeGeometry);
+    mCenters.assign(centers.begin(), centers.end());
+    mNormals.assign(normals.begin(), normals.end());
+    mPointDiscs = std::move(discs);
+    mPointNormals = std::move(padded);
+    mPointIds = std::move(layout.pointIds);
+    mPlanes = std::move(layout.planes);
+    mCellStart = std::move(layout.cellStart);
+    mCellDiscs = std::move(layout.cellDiscs);
+    mCellCenters = std::move(layout.cellCenters);
+    mQuadPlane = std::move(layout.quadPlane);
+    mQuadCorners = std::move(layout.quadCorners);
+    mQuadIndices = std::move(layout.quadIndices);
     mRadius = radius;
-    mCount = count;
+    updateBox();
 }
 
 void DiscIndex::move(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals) {
-    QGI_ASSERT(centers.size() == mCount && normals.size() == mCount,
+    QGI_ASSERT(mMotion == Motion::Moving, "DiscIndex::move needs Motion::Moving");
+    QGI_ASSERT(centers.size() == size() && normals.size() == size(),
                "DiscIndex::move keeps the disc count");
-    if (mCount == 0) return;
-    for (std::size_t i = 0; i < mCount; ++i) {
+    if (size() == 0) return;
+    for (std::size_t i = 0; i < size(); ++i) {
         QGI_ASSERT(isFinite(centers[i]) && isFinite(normals[i]), "non-finite disc ", i);
-        mDiscs[i] = glm::vec4(centers[i], mRadius * kEmbreeWiden);
+        mCenters[i] = centers[i];
         mNormals[i] = normals[i];
+        mPointDiscs[i] = glm::vec4(centers[i], mRadius * kEmbreeWiden);
+        mPointNormals[i] = normals[i];
     }
+    updateBox();
     rtcUpdateGeometryBuffer(mGeometry.get(), RTC_BUFFER_TYPE_VERTEX, 0);
     rtcUpdateGeometryBuffer(mGeometry.get(), RTC_BUFFER_TYPE_NORMAL, 0);
     rtcCommitGeometry(mGeometry.get());
     rtcCommitScene(mScene.get());
 }
 
+void DiscIndex::consider(const QueryContext& query, std::uint32_t position, std::uint32_t s,
+                         std::uint32_t disc, const glm::vec3& center, const glm::vec3& normal) {
+    const DiscIndex& index = *query.index;
+    const PhotonSegments& segments = *query.segments;
+    const float t = discCrossing(segments.origin[s], segments.direction[s], segments.length[s],
+                                 center, normal, index.mRadius);
+    if (t < 0.f) return;
+    // The cut copy counts t <= beyond + tolerance (the same float expression): skip those.
+    if (query.beyond && !(t > query.beyond[position] + kDiscEndTolerance * index.mRadius)) return;
+    query.pairs->push_back(std::uint64_t(position) << 32 | disc);
+}
+
 void DiscIndex::recordCrossings(const RTCFilterFunctionNArguments* args) {
     const auto* query = reinterpret_cast<const QueryContext*>(args->context);
-    const DiscIndex& index = *query->index;
-    const PhotonSegments& segments = *query->segments;
     for (unsigned i = 0; i < args->N; ++i) {
         if (args->valid[i] == 0) continue;
         args->valid[i] = 0; // rejected: traversal goes on to the next disc
         const std::uint32_t position = RTCRayN_id(args->ray, args->N, i);
-        const std::uint32_t disc = RTCHitN_primID(args->hit, args->N, i);
+        const DiscIndex& index = *query->index;
+        const std::uint32_t disc = index.mPointIds[RTCHitN_primID(args->hit, args->N, i)];
+        consider(*query, position, query->indices[position], disc, index.mCenters[disc],
+                 index.mNormals[disc]);
+    }
+}
+
+void DiscIndex::recordPlaneCrossings(const RTCFilterFunctionNArguments* args) {
+    const auto* query = reinterpret_cast<const QueryContext*>(args->context);
+    const DiscIndex& index = *query->index;
+    const PhotonSegments& segments = *query->segments;
+    const float cell = kPlaneCellRadii * index.mRadius;
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        args->valid[i] = 0; // rejected: traversal goes on
+        const std::uint32_t position = RTCRayN_id(args->ray, args->N, i);
         const std::uint32_t s = query->indices[position];
-        const float t = discCrossing(segments.origin[s], segments.direction[s], segments.length[s],
-                                     index.center(disc), index.mNormals[disc], index.mRadius);
-        if (t < 0.f) continue;
-        // The cut copy counts t <= beyond + tolerance (the same float expression): skip those.
-        if (query->beyond && !(t > query->beyond[position] + kDiscEndTolerance * index.mRadius))
-            continue;
-        query->pairs->push_back(std::uint64_t(position) << 32 | disc);
+        const Plane& plane = index.mPlanes[index.mQuadPlane[RTCHitN_primID(args->hit, args->N, i)]];
+        const glm::vec3& o = segments.origin[s];
+        const glm::vec3& d = segments.direction[s];
+        // From behind or parallel: crossesDisc() turns down every disc of the plane.
+        if (!(d[plane.axis] * plane.normal[plane.axis] < 0.f)) continue;
+        const float t = (plane.coordinate - o[plane.axis]) / d[plane.axis];
+        const float u = o[plane.u] + t * d[plane.u], v = o[plane.v] + t * d[plane.v];
+        // A crossing point that is not finite is no disc's: crossesDisc() would say so too.
+        if (!std::isfinite(u) || !std::isfinite(v)) continue;
+        const auto column = std::uint32_t(
+            std::clamp(std::floor((u - plane.corner.x) / cell), 0.f, float(plane.columns - 1)));
+        const auto row = std::uint32_t(
+            std::clamp(std::floor((v - plane.corner.y) / cell), 0.f, float(plane.rows - 1)));
+        const std::uint32_t c0 = column > 0 ? column - 1 : 0;
+        const std::uint32_t c1 = std::min(column + 1, plane.columns - 1);
+        const std::uint32_t r0 = row > 0 ? row - 1 : 0;
+        const std::uint32_t r1 = std::min(row + 1, plane.rows - 1);
+        for (std::uint32_t r = r0; r <= r1; ++r) {
+            const std::size_t rowCells = plane.firstCell + std::size_t(r) * plane.columns;
+            const std::uint32_t end = index.mCellStart[rowCells + c1 + 1];
+            for (std::uint32_t j = index.mCellStart[rowCells + c0]; j < end; ++j)
+                consider(*query, position, s, index.mCellDiscs[j], index.mCellCenters[j],
+                         plane.normal);
+        }
     }
 }
 
@@ -127,8 +402,8 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
     const PhotonSegments& segments = *query.segments;
     const std::size_t begin = chunk * kChunkSize;
     const std::size_t end = std::min(query.count, begin + kChunkSize);
-    const float slack = kEmbreeSlack * mRadius;
-    const float tail = kDiscEndTolerance * mRadius + 2.f * slack;
+    const double slack = double(kEmbreeSlack) * mRadius;
+    const double endTolerance = double(kDiscEndTolerance) * mRadius;
 
     for (std::size_t k = begin; k < end; ++k) {
         // The indices may point anywhere in a large store (a moved mobile's segments): ask
@@ -140,20 +415,36 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
             __builtin_prefetch(&segments.length[ahead]);
         }
         const std::uint32_t s = query.indices[k];
+        const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
-        const glm::vec3 origin = segments.origin[s] - slack * d;
+        // The part of the segment Embree sees, in the segment's t: from the counted part's
+        // start to the end past the landing tolerance, kEmbreeSlack radii wider at each end,
+        // then clipped to the box around the discs. In double: Embree's ray starts where the
+        // clipped part does, so that a segment from far away (a distant light) is traced from
+        // near the discs and Embree's rounding stays that of the scene's scale.
+        double start = (query.beyond ? std::max(0.0, double(query.beyond[k]) + endTolerance)
+                                     : 0.0) - slack;
+        double stop = double(segments.length[s]) + endTolerance + slack; // +inf stays +inf
+        for (int a = 0; a < 3; ++a) {
+            if (d[a] == 0.f) {
+                if (o[a] < mBoxMin[a] || o[a] > mBoxMax[a]) stop = -1.0;
+                continue;
+            }
+            const double t0 = (mBoxMin[a] - o[a]) / d[a], t1 = (mBoxMax[a] - o[a]) / d[a];
+            start = std::max(start, std::min(t0, t1));
+            stop = std::min(stop, std::max(t0, t1));
+        }
+        if (!(start <= stop)) continue; // misses the box: no disc to cross
         RTCRay ray;
-        ray.org_x = origin.x;
-        ray.org_y = origin.y;
-        ray.org_z = origin.z;
-        // Embree's t is the segment's t + slack: start where the counted part starts.
-        ray.tnear =
-            query.beyond ? std::max(0.f, query.beyond[k] + kDiscEndTolerance * mRadius) : 0.f;
+        ray.org_x = float(o.x + start * d.x);
+        ray.org_y = float(o.y + start * d.y);
+        ray.org_z = float(o.z + start * d.z);
+        ray.tnear = 0.f;
         ray.dir_x = d.x;
         ray.dir_y = d.y;
         ray.dir_z = d.z;
         ray.time = 0.f;
-        ray.tfar = segments.length[s] + tail; // +inf stays +inf
+        ray.tfar = float(stop - start);
         ray.mask = ~0u;
         ray.id = std::uint32_t(k);
         ray.flags = 0;
@@ -169,7 +460,7 @@ void DiscIndex::collectCrossings(const PhotonSegments& segments,
                                  std::vector<DiscCrossing>& out, std::span<const float> beyond) {
     QGI_ASSERT(beyond.empty() || beyond.size() == indices.size(), "one length per index");
     out.clear();
-    if (mCount == 0 || indices.empty()) return;
+    if (size() == 0 || indices.empty()) return;
     const std::size_t chunks = (indices.size() + kChunkSize - 1) / kChunkSize;
     if (mChunkPairs.size() < chunks) mChunkPairs.resize(chunks);
 

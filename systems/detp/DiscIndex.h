@@ -3,6 +3,7 @@
 #include "runtime/raytrace/EmbreeHandle.h"
 #include "systems/detp/DiscCrossing.h"
 
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 
@@ -16,13 +17,30 @@ class EmbreeDevice;
 struct PhotonSegments;
 
 /** Finds every (segment, disc) pair that crossesDisc() accepts, for many discs of one radius
- *  (seed 000 section 2.7, disc indexing), with Embree's oriented-disc points.
+ *  (seed 000 section 2.7, disc indexing), with Embree.
  *
- *  Embree sees each disc 1% wider and each segment kEmbreeSlack radii longer at both ends, so
- *  rounding in its own disc test can only add candidates, never lose one; a geometry filter
- *  applies the exact crossesDisc() rule to every candidate, records the pair and rejects the
- *  hit so traversal goes on to the next disc. Discs are two-sided in Embree: the front-side
- *  rule is the filter's. The result is therefore exactly the brute-force set.
+ *  Two kinds of primitive share one Embree scene, each with a filter that applies the exact
+ *  crossesDisc() rule to every candidate, records the pair and rejects the hit so traversal goes
+ *  on. The result is therefore exactly the brute-force set.
+ *   - Oriented-disc points, one per disc. Embree sees each disc 1% wider and each segment
+ *     kEmbreeSlack radii longer at both ends, so rounding in its own disc test can only add
+ *     candidates, never lose one. Discs are two-sided in Embree: the front-side rule is the
+ *     filter's.
+ *   - Plane patches (Motion::Static only). Discs whose normal is exactly plus or minus one axis
+ *     and whose centres share that axis's coordinate bit for bit (walls, floors and slabs of
+ *     axis-aligned architecture: two thirds of the atrium's discs) lie in one plane. For those,
+ *     crossesDisc() computes the same t and crossing point for every disc of the plane, so a
+ *     segment needs one plane crossing, not a walk through a BVH of heavily overlapping discs.
+ *     Each such plane gets a 2D grid of cells kPlaneCellRadii radii wide holding its discs, and
+ *     Embree a few rectangles covering the cells within one cell of a disc. A segment that
+ *     meets a rectangle has its crossing point looked up in the grid; the discs of the 3 x 3
+ *     cells around it (every disc within a cell's width of the point) go through crossesDisc().
+ *  Embree's ray starts where the segment enters the box around the discs (computed in double),
+ *  so a segment from a distant light is traced at the scene's scale. What stays is the rounding
+ *  of crossesDisc() itself, which grows with the segment origin's distance: the index is exact
+ *  while it stays within Embree's 1% widening of a point disc and the quarter radius a plane's
+ *  lookup has to spare, that is for origins within about ten thousand radii of the discs
+ *  (points) and over a hundred thousand (planes); the tests check both.
  *
  *  Segments are traced as occlusion rays (the filter sees every candidate and nothing needs
  *  the closest hit: 15% faster than intersection rays; single rays beat 8-wide packets here
@@ -44,6 +62,12 @@ public:
     static constexpr std::size_t kChunkSize = 256;
     /// Extension of each Embree segment at both ends, in disc radii (see the class comment).
     static constexpr float kEmbreeSlack = 0.05f;
+    /// Width of a plane patch's grid cell, in disc radii: more than one, so that the 3 x 3
+    /// cells around a crossing point hold every disc within a radius of it, with a quarter
+    /// radius to spare for rounding.
+    static constexpr float kPlaneCellRadii = 1.25f;
+    /// Fewest discs a plane needs to become a patch; fewer stay oriented-disc points.
+    static constexpr std::size_t kMinPlaneDiscs = 16;
 
     DiscIndex(EmbreeDevice& device, Motion motion);
     DiscIndex(const DiscIndex&) = delete;
@@ -67,28 +91,68 @@ public:
                           std::vector<DiscCrossing>& out,
                           std::span<const float> beyond = {});
 
-    std::size_t size() const { return mCount; }
+    std::size_t size() const { return mCenters.size(); }
     float radius() const { return mRadius; }
-    glm::vec3 center(std::uint32_t disc) const { return glm::vec3(mDiscs[disc]); }
+    glm::vec3 center(std::uint32_t disc) const { return mCenters[disc]; }
     glm::vec3 normal(std::uint32_t disc) const { return mNormals[disc]; }
+    /// Discs held in plane patches (the rest are oriented-disc points), and the patches.
+    std::size_t planarDiscCount() const { return mCellDiscs.size(); }
+    std::size_t planeCount() const { return mPlanes.size(); }
 
 private:
     struct QueryContext; // RTCIntersectContext plus what the filter needs
 
-    void commit();
+    /// Discs sharing one axis-aligned plane, and the grid that holds them.
+    struct Plane {
+        std::uint8_t axis = 0;      ///< the normal is plus or minus this axis
+        std::uint8_t u = 1, v = 2;  ///< the other two axes, the grid's columns and rows
+        float coordinate = 0.f;     ///< of every centre along `axis`
+        glm::vec3 normal{0.f};      ///< every one of its discs' normal, bit for bit
+        glm::vec2 corner{0.f};      ///< (u, v) of the grid's first cell's corner
+        std::uint32_t columns = 0, rows = 0;
+        std::uint32_t firstCell = 0; ///< its cells' ranges start at mCellStart[firstCell]
+    };
+    /// What build() makes before anything is committed (so a failure changes nothing).
+    struct Layout;
+
+    static void splitIntoPlanes(std::span<const glm::vec3> centers,
+                                std::span<const glm::vec3> normals, float radius, Layout& out);
+    /// Records the pair (position, disc) when segment s crosses the disc (centre, normal):
+    /// the rule and the `beyond` cut, shared by both filters.
+    static void consider(const QueryContext& query, std::uint32_t position, std::uint32_t s,
+                         std::uint32_t disc, const glm::vec3& center, const glm::vec3& normal);
     static void recordCrossings(const RTCFilterFunctionNArguments* args);
+    static void recordPlaneCrossings(const RTCFilterFunctionNArguments* args);
     void traceChunk(const QueryContext& query, std::size_t chunk);
+    /// mBoxMin/mBoxMax from the centres (build(), move()).
+    void updateBox();
 
     EmbreeDevice& mDevice;
     Motion mMotion;
     SceneHandle mScene;
-    GeometryHandle mGeometry;
+    GeometryHandle mGeometry;      ///< oriented-disc points
+    GeometryHandle mPlaneGeometry; ///< the patches' rectangles (quads)
     float mRadius = 0.f;
-    std::size_t mCount = 0;
-    /// Embree's buffers, shared: centre and Embree's (widened) radius; normals padded with one
-    /// element so Embree's 16-byte loads of the last one stay inside the allocation.
-    std::vector<glm::vec4> mDiscs;
+    /// Around every disc, with room for the widening and the segments' slack (traceChunk).
+    glm::dvec3 mBoxMin{0.0}, mBoxMax{0.0};
+    std::vector<glm::vec3> mCenters; ///< every disc, by disc index
     std::vector<glm::vec3> mNormals;
+    /// Embree's buffers, shared: centre and Embree's (widened) radius of each point disc;
+    /// normals padded with one element so Embree's 16-byte loads of the last one stay inside
+    /// the allocation; the disc index of each point.
+    std::vector<glm::vec4> mPointDiscs;
+    std::vector<glm::vec3> mPointNormals;
+    std::vector<std::uint32_t> mPointIds;
+    /// Plane patches: discs sorted by (plane, row, column), each cell's range in
+    /// mCellStart (one entry past the last cell), each rectangle's plane, and Embree's
+    /// rectangle corners (16-byte rows) and indices.
+    std::vector<Plane> mPlanes;
+    std::vector<std::uint32_t> mCellStart;
+    std::vector<std::uint32_t> mCellDiscs;
+    std::vector<glm::vec3> mCellCenters;
+    std::vector<std::uint32_t> mQuadPlane;
+    std::vector<glm::vec4> mQuadCorners;
+    std::vector<glm::uvec4> mQuadIndices;
     /// Per chunk: the pairs it found as (position in the query << 32 | disc).
     std::vector<std::vector<std::uint64_t>> mChunkPairs;
 };
