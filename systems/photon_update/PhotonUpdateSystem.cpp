@@ -378,18 +378,29 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     mFirstAffected.resize(mCandidates.size());
 
     // Paths being re-shot anyway are skipped (-1).
+    const float tolerance = kLandingTolerance * glm::length(mSceneBox.extent());
+    for (LandingScratch& scratch : mLandingScratch) {
+        scratch.relabels.clear();
+        scratch.kept = scratch.checked = 0;
+    }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
                       [&](const tbb::blocked_range<std::size_t>& range) {
+                          LandingScratch& scratch = mLandingScratch.local();
                           walkPathsPrefetched(store, mCandidates, range.begin(), range.end(),
                                               [&](std::size_t i) {
                                                   mFirstAffected[i] =
                                                       testBit(mReshooting, mCandidates[i])
                                                           ? -1
-                                                          : nextAffected(scene, store,
-                                                                         mCandidates[i], 0);
+                                                          : firstToRetrace(scene, store,
+                                                                           mCandidates[i],
+                                                                           tolerance, scratch);
                                               });
                       });
-    if (mSettings.reuseLandedPaths) skipLandedSegments(scene, store);
+    for (const LandingScratch& scratch : mLandingScratch) {
+        mRelabels.insert(mRelabels.end(), scratch.relabels.begin(), scratch.relabels.end());
+        mStats.landedPaths += scratch.kept;
+        mStats.retestedSegments += scratch.checked;
+    }
     for (const Job& job : mJobs)
         setBit(mReshooting, job.path, false);
     for (std::size_t i = 0; i < mCandidates.size(); ++i)
@@ -423,79 +434,65 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
     return -1;
 }
 
-void PhotonUpdateSystem::skipLandedSegments(const RayScene& scene, const PhotonStore& store) {
-    const PhotonSegments& segments = store.segments;
-    const float tolerance = kLandingTolerance * glm::length(mSceneBox.extent());
-    // The moved mobile that segment s hit, when that mobile only translated and the plane of
-    // the triangle hit slid along the segment by no more than a few times the tolerance: a
-    // translation by `shift` moves the plane with world normal n along a ray of direction d
+const PhotonUpdateSystem::MovedMobile*
+PhotonUpdateSystem::mayLand(const PhotonSegments& segments, std::size_t s, float tolerance) const {
+    // A translation by `shift` moves the plane with world normal n along a ray of direction d
     // by (n . shift) / (n . d), so the segment would meet it that much further or nearer.
-    // Null when the segment cannot land as recorded.
-    const auto mayLand = [&](std::size_t s) -> const MovedMobile* {
-        const Entity hit = segments.hitEntity[s];
-        for (const MovedMobile& m : mMoved) {
-            if (hit != m.entity) continue;
-            const std::uint32_t primitive = segments.hitPrimitive[s];
-            if (!m.translated || primitive >= m.translated->facetNormals.size()) return nullptr;
-            const glm::vec3 n = m.normalMatrix * m.translated->facetNormals[primitive];
-            const float slide = glm::dot(n, m.shift), along = glm::dot(n, segments.direction[s]);
-            return std::abs(slide) <= kLandingMargin * tolerance * std::abs(along) ? &m : nullptr;
-        }
-        return nullptr;
-    };
-    // Whether segment s, which hit `mobile` at its old pose, lands as recorded at the new one:
-    // the mobile there meets the ray first on the same plane at the same distance (within the
-    // tolerance), and no other moved mobile crosses the segment first. Static geometry and
-    // mobiles that did not move cannot be in the way: they were not before. The triangle now
-    // hit (a neighbour in the same plane, perhaps) goes to `primitive`.
-    const auto lands = [&](std::size_t s, const MovedMobile& mobile, std::uint32_t& primitive) {
-        const glm::vec3& o = segments.origin[s];
-        const glm::vec3& d = segments.direction[s];
-        const float length = segments.length[s];
-        const std::optional<Hit> hit = scene.intersectMobileLocal(
-            mobile.entity, mobile.toObject,
-            mobile.toLocal(o, d, std::numeric_limits<float>::infinity()));
-        if (!hit || !(std::abs(hit->t - length) <= tolerance) ||
-            !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
-            return false;
-        for (const MovedMobile& other : mMoved) {
-            if (&other == &mobile || !segmentMeetsBox(o, d, hit->t, other.newBox)) continue;
-            if (scene.occludedByMobile(other.entity, other.toLocal(o, d, hit->t))) return false;
-        }
-        primitive = hit->primitive;
-        return true;
-    };
+    const Entity hit = segments.hitEntity[s];
+    for (const MovedMobile& m : mMoved) {
+        if (hit != m.entity) continue;
+        const std::uint32_t primitive = segments.hitPrimitive[s];
+        if (!m.translated || primitive >= m.translated->facetNormals.size()) return nullptr;
+        const glm::vec3 n = m.normalMatrix * m.translated->facetNormals[primitive];
+        const float slide = glm::dot(n, m.shift), along = glm::dot(n, segments.direction[s]);
+        return std::abs(slide) <= kLandingMargin * tolerance * std::abs(along) ? &m : nullptr;
+    }
+    return nullptr;
+}
 
-    for (auto& list : mThreadRelabels)
-        list.clear();
-    std::atomic<std::size_t> kept = 0, checked = 0;
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
-        [&](const tbb::blocked_range<std::size_t>& range) {
-            std::vector<Relabel>& relabels = mThreadRelabels.local();
-            std::size_t rangeKept = 0, rangeChecked = 0;
-            for (std::size_t i = range.begin(); i < range.end(); ++i) {
-                // One affected segment after another, while each lands where it did.
-                while (mFirstAffected[i] >= 0) {
-                    const std::uint32_t k = std::uint32_t(mFirstAffected[i]);
-                    const std::size_t s = store.segmentIndex(mCandidates[i], k);
-                    const MovedMobile* mobile = mayLand(s);
-                    std::uint32_t primitive = 0;
-                    if (!mobile) break;
-                    ++rangeChecked;
-                    if (!lands(s, *mobile, primitive)) break; // re-traced from segment k
-                    if (primitive != segments.hitPrimitive[s]) relabels.push_back({s, primitive});
-                    mFirstAffected[i] = nextAffected(scene, store, mCandidates[i], k + 1);
-                    rangeKept += mFirstAffected[i] < 0 ? 1 : 0;
-                }
-            }
-            kept += rangeKept;
-            checked += rangeChecked;
-        });
-    for (const auto& list : mThreadRelabels)
-        mRelabels.insert(mRelabels.end(), list.begin(), list.end());
-    mStats.landedPaths = kept;
-    mStats.retestedSegments = checked;
+bool PhotonUpdateSystem::lands(const RayScene& scene, const PhotonSegments& segments,
+                               std::size_t s, const MovedMobile& mobile, float tolerance,
+                               std::uint32_t& primitive) const {
+    // The mobile at its new pose must meet the ray first on the same plane at the same
+    // distance (within the tolerance), and no other moved mobile may cross the segment first.
+    // Static geometry and mobiles that did not move cannot be in the way: they were not
+    // before. The triangle now hit may be a neighbour in the same plane.
+    const glm::vec3& o = segments.origin[s];
+    const glm::vec3& d = segments.direction[s];
+    const float length = segments.length[s];
+    const std::optional<Hit> hit = scene.intersectMobileLocal(
+        mobile.entity, mobile.toObject,
+        mobile.toLocal(o, d, std::numeric_limits<float>::infinity()));
+    if (!hit || !(std::abs(hit->t - length) <= tolerance) ||
+        !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
+        return false;
+    for (const MovedMobile& other : mMoved) {
+        if (&other == &mobile || !segmentMeetsBox(o, d, hit->t, other.newBox)) continue;
+        if (scene.occludedByMobile(other.entity, other.toLocal(o, d, hit->t))) return false;
+    }
+    primitive = hit->primitive;
+    return true;
+}
+
+std::int32_t PhotonUpdateSystem::firstToRetrace(const RayScene& scene, const PhotonStore& store,
+                                                std::uint32_t p, float tolerance,
+                                                LandingScratch& scratch) const {
+    const PhotonSegments& segments = store.segments;
+    std::int32_t k = nextAffected(scene, store, p, 0);
+    if (!mSettings.reuseLandedPaths) return k;
+    // One affected segment after another, while each lands where it did.
+    while (k >= 0) {
+        const std::size_t s = store.segmentIndex(p, std::uint32_t(k));
+        const MovedMobile* mobile = mayLand(segments, s, tolerance);
+        if (!mobile) break;
+        ++scratch.checked;
+        std::uint32_t primitive = 0;
+        if (!lands(scene, segments, s, *mobile, tolerance, primitive)) break; // re-traced from k
+        if (primitive != segments.hitPrimitive[s]) scratch.relabels.push_back({s, primitive});
+        k = nextAffected(scene, store, p, std::uint32_t(k) + 1);
+        scratch.kept += k < 0 ? 1 : 0;
+    }
+    return k;
 }
 
 void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta) {

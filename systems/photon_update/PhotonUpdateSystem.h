@@ -141,11 +141,28 @@ private:
     /// crosses one at its new pose; -1 when there is none.
     std::int32_t nextAffected(const RayScene& scene, const PhotonStore& store, std::uint32_t p,
                               std::uint32_t from) const;
-    /// reuseLandedPaths: tests again, against the moved mobiles alone, each affected segment
-    /// that hit a mobile which only translated; where it lands as recorded, moves on to the
-    /// path's next affected segment (-1 when none is left), until every entry of
-    /// mFirstAffected is settled.
-    void skipLandedSegments(const RayScene& scene, const PhotonStore& store);
+    /// What one thread's landing tests produce: triangles to relabel, and counts.
+    struct LandingScratch {
+        std::vector<Relabel> relabels;
+        std::size_t kept = 0;    ///< paths every affected segment of which landed as recorded
+        std::size_t checked = 0; ///< segments tested again
+    };
+    /// The segment path p is re-traced from, -1 for none: its first affected segment
+    /// (nextAffected), or with reuseLandedPaths, the first affected one that does not land as
+    /// recorded. Each affected segment that hit a mobile which only translated is tested again
+    /// against the moved mobiles alone; while one lands as recorded, the path's next affected
+    /// segment is taken. Done in the same walk as nextAffected, while the path is in cache.
+    std::int32_t firstToRetrace(const RayScene& scene, const PhotonStore& store, std::uint32_t p,
+                                float tolerance, LandingScratch& scratch) const;
+    /// The moved mobile that segment s hit, when that mobile only translated and the plane of
+    /// the triangle hit slid along the segment by no more than a few times `tolerance`; null
+    /// when the segment cannot land as recorded.
+    const MovedMobile* mayLand(const PhotonSegments& segments, std::size_t s,
+                               float tolerance) const;
+    /// Whether segment s, which hit `mobile` at its old pose, lands as recorded at the new
+    /// one; the triangle it now hits goes to `primitive`.
+    bool lands(const RayScene& scene, const PhotonSegments& segments, std::size_t s,
+               const MovedMobile& mobile, float tolerance, std::uint32_t& primitive) const;
     void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
     void compact(PhotonStore& store);
     /// Store capacity for `live` segments.
@@ -171,7 +188,7 @@ private:
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::int32_t> mFirstAffected;
     std::vector<Relabel> mRelabels;
-    tbb::enumerable_thread_specific<std::vector<Relabel>> mThreadRelabels;
+    tbb::enumerable_thread_specific<LandingScratch> mLandingScratch;
     std::vector<Job> mJobs;
     std::vector<std::uint32_t> mEnds;
     std::vector<std::uint64_t> mWrite;      ///< per job: where its path goes in the store
