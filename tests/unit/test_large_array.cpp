@@ -2,6 +2,8 @@
 // advised for huge pages. It must behave as a vector on both sides of that threshold.
 #include "runtime/core/LargeArray.h"
 
+#include "runtime/ecs/Entity.h"
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -29,6 +31,21 @@ TEST(LargeArray, SmallAndLargeBlocksHoldTheirValuesThroughGrowth) {
     values.push_back(7u);
     EXPECT_EQ(values.front(), 7u);
     EXPECT_EQ(copy[kBig - 1], std::uint32_t(3000 + kBig - 1 - 1000));
+}
+
+// Growing without a value default-initialises: a type with member initialisers still gets
+// them (an Entity is null, not index 0), and a value given is copied into every new element.
+TEST(LargeArray, GrowingKeepsConstructorsAndGivenValues) {
+    LargeArray<Entity> entities;
+    entities.resize(3);
+    for (const Entity e : entities)
+        EXPECT_TRUE(e.isNull());
+    LargeArray<float> lengths(2, 1.5f);
+    lengths.resize(5, -2.f);
+    EXPECT_EQ(lengths[1], 1.5f);
+    EXPECT_EQ(lengths[4], -2.f);
+    lengths.emplace_back(4.f);
+    EXPECT_EQ(lengths.back(), 4.f);
 }
 
 TEST(LargeArray, AnImpossibleSizeThrowsInsteadOfWrapping) {
