@@ -51,13 +51,13 @@ void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, s
     s.rays.resize(n);
     s.hits.resize(n);
     out.counts.assign(n, 0);
-    if (out.slots.size() < n * slotsPerPath) out.slots.resize(n * slotsPerPath);
+    if (s.slots.size() < n * slotsPerPath) s.slots.resize(n * slotsPerPath);
     for (std::size_t i = 0; i < n; ++i) {
         s.state[i] = head(begin + i);
         s.active[i] = std::uint32_t(i);
     }
 
-    PhotonSegments& slots = out.slots;
+    PhotonSegments& slots = s.slots;
     std::size_t live = n;
     while (live > 0) {
         for (std::size_t j = 0; j < live; ++j) {
@@ -90,6 +90,24 @@ void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, s
         }
         live = next;
     }
+
+    // Pack path by path while the slots are in cache.
+    std::size_t total = 0;
+    for (const std::uint32_t c : out.counts)
+        total += c;
+    PhotonSegments& packed = out.segments;
+    packed.resize(total);
+    for (std::size_t i = 0, to = 0; i < n; ++i)
+        for (std::size_t k = 0; k < out.counts[i]; ++k, ++to) {
+            const std::size_t slot = k * n + i;
+            packed.origin[to] = slots.origin[slot];
+            packed.direction[to] = slots.direction[slot];
+            packed.length[to] = slots.length[slot];
+            packed.power[to] = slots.power[slot];
+            packed.hitEntity[to] = slots.hitEntity[slot];
+            packed.hitPrimitive[to] = slots.hitPrimitive[slot];
+            packed.bounce[to] = slots.bounce[slot];
+        }
 }
 
 void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::size_t count,
@@ -116,22 +134,9 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
                 ends.push_back(ends.back() + c);
         out.resize(ends.back());
         tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
-            const Block& block = mBlocks[b];
-            const std::size_t n = block.counts.size();
+            const PhotonSegments& packed = mBlocks[b].segments;
             const std::size_t first = firstEnd + b * blockPaths;
-            const PhotonSegments& from = block.slots;
-            for (std::size_t i = 0; i < n; ++i)
-                for (std::size_t k = 0, to = ends[first + i] - block.counts[i]; k < block.counts[i];
-                     ++k, ++to) {
-                    const std::size_t s = k * n + i;
-                    out.origin[to] = from.origin[s];
-                    out.direction[to] = from.direction[s];
-                    out.length[to] = from.length[s];
-                    out.power[to] = from.power[s];
-                    out.hitEntity[to] = from.hitEntity[s];
-                    out.hitPrimitive[to] = from.hitPrimitive[s];
-                    out.bounce[to] = from.bounce[s];
-                }
+            out.copyFrom(ends[first - 1], packed, 0, packed.size());
         });
     }
 }

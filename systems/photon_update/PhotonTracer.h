@@ -51,17 +51,20 @@ public:
                const HeadFn& head, PhotonSegments& out, std::vector<std::uint32_t>& ends);
 
 private:
-    /// One thread's working set for tracing a block.
+    /// One thread's working set for tracing a block. The slots stay with the thread, so they
+    /// are in cache from one block to the next: a traced block's path i has its k-th segment
+    /// in slots[k * n + i] (bounce-major, so that a wavefront's writes land together).
     struct Scratch {
         std::vector<PhotonHead> state;
         std::vector<std::uint32_t> active;
         std::vector<Ray> rays;
         std::vector<std::optional<Hit>> hits;
-    };
-    /// A traced block of n paths: path i's k-th segment is slots[k * n + i] (bounce-major, so
-    /// that a wavefront's writes land together), k < counts[i].
-    struct Block {
         PhotonSegments slots;
+    };
+    /// A traced block of paths, packed while the slots are still in cache: path i's segments
+    /// are contiguous, after those of paths 0 .. i-1; counts[i] of them.
+    struct Block {
+        PhotonSegments segments;
         std::vector<std::uint32_t> counts;
     };
 
