@@ -36,7 +36,7 @@ inline float discCrossing(const glm::vec3& origin, const glm::vec3& direction, f
     const float cosine = glm::dot(direction, normal);
     if (!(cosine < 0.f)) return -1.f;
     const float t = glm::dot(center - origin, normal) / cosine;
-    if (!(t >= 0.f) || t > length + kDiscEndTolerance * radius) return -1.f;
+    if (!(t >= 0.f) || !(t <= length + kDiscEndTolerance * radius)) return -1.f; // NaN: no
     const glm::vec3 offset = origin + t * direction - center;
     return glm::dot(offset, offset) <= radius * radius ? t : -1.f;
 }

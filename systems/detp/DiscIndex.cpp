@@ -26,11 +26,17 @@ constexpr float kEmbreeWiden = 1.01f;
 constexpr std::size_t kPrefetchAhead = 8;
 /// A plane's rectangles overlap their neighbours by this fraction of a cell, so that a
 /// crossing on a shared edge meets at least one of them whatever Embree's rounding.
-constexpr float kRectangleOverlap = 0.01f;
+constexpr float kRectangleOverlap = 0.05f;
+/// The two triangles of a rectangle are this fraction larger than its halves (see
+/// splitIntoPlanes), so that they overlap across its diagonal.
+constexpr float kDiagonalOverlap = 0.02f;
 /// A plane becomes a patch only while its grid has at most this many cells per disc (plus
 /// kGridCellsSpare): discs strewn thinly over a large plane stay points.
 constexpr std::size_t kGridCellsPerDisc = 64;
-constexpr std::size_t kGridCellsSpare = 4096;
+constexpr std::size_t kGridCellsSpare = 1024;
+/// Grid sides and cell totals stay far inside what float cell indices and uint32 offsets hold.
+constexpr double kMaxGridSide = double(1 << 22);
+constexpr double kMaxCells = double(std::uint32_t(1) << 31);
 bool isFinite(const glm::vec3& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
 }
@@ -80,9 +86,9 @@ struct DiscIndex::Layout {
     std::vector<std::uint32_t> cellStart{0};
     std::vector<std::uint32_t> cellDiscs;
     std::vector<glm::vec3> cellCenters;
-    std::vector<std::uint32_t> quadPlane;
-    std::vector<glm::vec4> quadCorners;
-    std::vector<glm::uvec4> quadIndices;
+    std::vector<Rectangle> rectangles;
+    std::vector<glm::vec4> patchVertices;
+    std::vector<glm::uvec3> patchTriangles;
 };
 
 DiscIndex::DiscIndex(EmbreeDevice& device, Motion motion) : mDevice(device), mMotion(motion) {}
@@ -101,8 +107,9 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
     for (std::uint32_t i = 0; i < centers.size(); ++i) {
         const int axis = exactAxis(normals[i]);
         if (axis < 0) continue;
-        keyed.push_back({{bitsOf(normals[i].x), bitsOf(normals[i].y), bitsOf(normals[i].z),
-                          bitsOf(centers[i][axis])},
+        // + 0.f: a negative zero joins the positive one (the rule gives the same answers).
+        keyed.push_back({{bitsOf(normals[i].x + 0.f), bitsOf(normals[i].y + 0.f),
+                          bitsOf(normals[i].z + 0.f), bitsOf(centers[i][axis] + 0.f)},
                          i});
     }
     std::sort(keyed.begin(), keyed.end());
@@ -135,7 +142,9 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
         // One empty cell all around: the 3 x 3 neighbourhood of a disc's cell is in the grid.
         const double columns = std::floor(double(hi.x - lo.x) / cell) + 3.0;
         const double rows = std::floor(double(hi.y - lo.y) / cell) + 3.0;
-        if (!(columns * rows <= double(kGridCellsPerDisc * group.size() + kGridCellsSpare)))
+        if (!(columns * rows <= double(kGridCellsPerDisc * group.size() + kGridCellsSpare)) ||
+            columns > kMaxGridSide || rows > kMaxGridSide ||
+            double(out.cellStart.size()) + columns * rows > kMaxCells)
             continue;
         plane.columns = std::uint32_t(columns);
         plane.rows = std::uint32_t(rows);
@@ -178,16 +187,9 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
         // Rectangles: runs of active cells along each row, merged with the run of the same
         // columns in the row below.
         struct Run {
-            std::uint32_t first, last, quad;
+            std::uint32_t first, last, rectangle;
         };
         std::vector<Run> above, here;
-        const auto corner = [&](float u, float v) {
-            glm::vec4 p(0.f);
-            p[plane.axis] = plane.coordinate;
-            p[plane.u] = u;
-            p[plane.v] = v;
-            return p;
-        };
         const auto planeIndex = std::uint32_t(out.planes.size());
         for (std::uint32_t row = 0; row < plane.rows; ++row) {
             here.clear();
@@ -206,22 +208,15 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
                     return a.first == run.first && a.last == run.last;
                 });
                 if (same != above.end()) { // extend the rectangle one row down
-                    run.quad = same->quad;
-                    glm::vec4* q = &out.quadCorners[4 * std::size_t(run.quad)];
-                    q[2][plane.v] = v1;
-                    q[3][plane.v] = v1;
+                    run.rectangle = same->rectangle;
+                    out.rectangles[run.rectangle].hi.y = v1;
                 } else {
-                    run.quad = std::uint32_t(out.quadPlane.size());
-                    const float u0 = plane.corner.x + float(run.first) * cell - overlap;
-                    const float u1 = plane.corner.x + float(run.last + 1) * cell + overlap;
-                    const float v0 = plane.corner.y + float(row) * cell - overlap;
-                    const auto base = std::uint32_t(out.quadCorners.size());
-                    out.quadCorners.push_back(corner(u0, v0));
-                    out.quadCorners.push_back(corner(u1, v0));
-                    out.quadCorners.push_back(corner(u1, v1));
-                    out.quadCorners.push_back(corner(u0, v1));
-                    out.quadIndices.emplace_back(base, base + 1, base + 2, base + 3);
-                    out.quadPlane.push_back(planeIndex);
+                    run.rectangle = std::uint32_t(out.rectangles.size());
+                    out.rectangles.push_back(
+                        {planeIndex,
+                         {plane.corner.x + float(run.first) * cell - overlap,
+                          plane.corner.y + float(row) * cell - overlap},
+                         {plane.corner.x + float(run.last + 1) * cell + overlap, v1}});
                 }
                 here.push_back(run);
             }
@@ -231,6 +226,32 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
     }
     for (std::uint32_t i = 0; i < centers.size(); ++i)
         if (!planar[i]) out.pointIds.push_back(i);
+
+    // Each rectangle as two right triangles, each stretched about its right-angle corner so
+    // that they overlap across the diagonal: a crossing on the diagonal meets at least one of
+    // them whatever Embree's rounding (its triangle test is not watertight). Triangle 2i and
+    // 2i + 1 are rectangle i's.
+    for (const Rectangle& r : out.rectangles) {
+        const Plane& plane = out.planes[r.plane];
+        const auto vertex = [&](glm::vec2 uv) {
+            glm::vec4 p(0.f);
+            p[plane.axis] = plane.coordinate;
+            p[plane.u] = uv.x;
+            p[plane.v] = uv.y;
+            return p;
+        };
+        const glm::vec2 size = (r.hi - r.lo) * (1.f + kDiagonalOverlap);
+        const auto base = std::uint32_t(out.patchVertices.size());
+        // Right angle at (hi.x, lo.y), then at (lo.x, hi.y).
+        out.patchVertices.push_back(vertex({r.hi.x - size.x, r.lo.y}));
+        out.patchVertices.push_back(vertex({r.hi.x, r.lo.y}));
+        out.patchVertices.push_back(vertex({r.hi.x, r.lo.y + size.y}));
+        out.patchVertices.push_back(vertex({r.lo.x + size.x, r.hi.y}));
+        out.patchVertices.push_back(vertex({r.lo.x, r.hi.y}));
+        out.patchVertices.push_back(vertex({r.lo.x, r.hi.y - size.y}));
+        out.patchTriangles.emplace_back(base, base + 1, base + 2);
+        out.patchTriangles.emplace_back(base + 3, base + 4, base + 5);
+    }
 }
 
 void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
@@ -252,6 +273,9 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
 
     mDevice.takeError(); // earlier errors were logged; this build reports only its own
     const RTCDevice device = mDevice.handle();
+    if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0)
+        fail("DiscIndex: this Embree was built with backface culling; the disc index needs "
+             "two-sided triangles");
     SceneHandle scene(rtcNewScene(device));
     rtcSetSceneBuildQuality(scene.get(), mMotion == Motion::Static ? RTC_BUILD_QUALITY_HIGH
                                                                    : RTC_BUILD_QUALITY_LOW);
@@ -278,14 +302,14 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
         rtcAttachGeometry(scene.get(), geometry.get());
     }
     GeometryHandle planeGeometry;
-    if (!layout.quadPlane.empty()) {
-        planeGeometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD));
+    if (!layout.rectangles.empty()) {
+        planeGeometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE));
         rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_VERTEX, 0,
-                                   RTC_FORMAT_FLOAT3, layout.quadCorners.data(), 0,
-                                   sizeof(glm::vec4), layout.quadCorners.size());
-        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
-                                   layout.quadIndices.data(), 0, sizeof(glm::uvec4),
-                                   layout.quadIndices.size());
+                                   RTC_FORMAT_FLOAT3, layout.patchVertices.data(), 0,
+                                   sizeof(glm::vec4), layout.patchVertices.size());
+        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                   layout.patchTriangles.data(), 0, sizeof(glm::uvec3),
+                                   layout.patchTriangles.size());
         rtcSetGeometryOccludedFilterFunction(planeGeometry.get(), &DiscIndex::recordPlaneCrossings);
         rtcCommitGeometry(planeGeometry.get());
         rtcAttachGeometry(scene.get(), planeGeometry.get());
@@ -305,9 +329,9 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
     mCellStart = std::move(layout.cellStart);
     mCellDiscs = std::move(layout.cellDiscs);
     mCellCenters = std::move(layout.cellCenters);
-    mQuadPlane = std::move(layout.quadPlane);
-    mQuadCorners = std::move(layout.quadCorners);
-    mQuadIndices = std::move(layout.quadIndices);
+    mRectangles = std::move(layout.rectangles);
+    mPatchVertices = std::move(layout.patchVertices);
+    mPatchTriangles = std::move(layout.patchTriangles);
     mRadius = radius;
     updateBox();
 }
@@ -366,7 +390,8 @@ void DiscIndex::recordPlaneCrossings(const RTCFilterFunctionNArguments* args) {
         args->valid[i] = 0; // rejected: traversal goes on
         const std::uint32_t position = RTCRayN_id(args->ray, args->N, i);
         const std::uint32_t s = query->indices[position];
-        const Plane& plane = index.mPlanes[index.mQuadPlane[RTCHitN_primID(args->hit, args->N, i)]];
+        const std::uint32_t rectangle = RTCHitN_primID(args->hit, args->N, i) / 2;
+        const Plane& plane = index.mPlanes[index.mRectangles[rectangle].plane];
         const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
         // From behind or parallel: crossesDisc() turns down every disc of the plane.
@@ -425,16 +450,17 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
         double start = (query.beyond ? std::max(0.0, double(query.beyond[k]) + endTolerance)
                                      : 0.0) - slack;
         double stop = double(segments.length[s]) + endTolerance + slack; // +inf stays +inf
+        bool outside = false;
         for (int a = 0; a < 3; ++a) {
             if (d[a] == 0.f) {
-                if (o[a] < mBoxMin[a] || o[a] > mBoxMax[a]) stop = -1.0;
+                outside = outside || o[a] < mBoxMin[a] || o[a] > mBoxMax[a];
                 continue;
             }
             const double t0 = (mBoxMin[a] - o[a]) / d[a], t1 = (mBoxMax[a] - o[a]) / d[a];
             start = std::max(start, std::min(t0, t1));
             stop = std::min(stop, std::max(t0, t1));
         }
-        if (!(start <= stop)) continue; // misses the box: no disc to cross
+        if (outside || !(start <= stop)) continue; // misses the box: no disc to cross
         RTCRay ray;
         ray.org_x = float(o.x + start * d.x);
         ray.org_y = float(o.y + start * d.y);

@@ -32,15 +32,23 @@ struct PhotonSegments;
  *     crossesDisc() computes the same t and crossing point for every disc of the plane, so a
  *     segment needs one plane crossing, not a walk through a BVH of heavily overlapping discs.
  *     Each such plane gets a 2D grid of cells kPlaneCellRadii radii wide holding its discs, and
- *     Embree a few rectangles covering the cells within one cell of a disc. A segment that
+ *     Embree a few rectangles (two triangles each) covering the cells within one cell of a
+ *     disc's, overlapping one another and across their diagonals. A segment that
  *     meets a rectangle has its crossing point looked up in the grid; the discs of the 3 x 3
  *     cells around it (every disc within a cell's width of the point) go through crossesDisc().
- *  Embree's ray starts where the segment enters the box around the discs (computed in double),
- *  so a segment from a distant light is traced at the scene's scale. What stays is the rounding
- *  of crossesDisc() itself, which grows with the segment origin's distance: the index is exact
- *  while it stays within Embree's 1% widening of a point disc and the quarter radius a plane's
- *  lookup has to spare, that is for origins within about ten thousand radii of the discs
- *  (points) and over a hundred thousand (planes); the tests check both.
+ *  Embree's ray starts where the part of the segment that can count enters the box around the
+ *  discs (computed in double), so a segment from a distant light is traced at the scene's
+ *  scale. What stays is rounding, and the index is exact while it stays inside the margins:
+ *   - the rule's own rounding grows with the segment origin's distance: within Embree's 1%
+ *     widening of a point disc up to about ten thousand radii from the discs, and within the
+ *     quarter radius a plane's lookup has to spare up to over a hundred thousand;
+ *   - rounding Embree's ray origin to float moves a crossing along the ray by about
+ *     ulp(coordinates) / |cos| for a segment meeting a plane at cosine cos. At a segment's end
+ *     the slack of kEmbreeSlack radii covers it down to |cos| of about 1e-4 at scene
+ *     coordinates of a few metres and a radius of a centimetre (a photon skimming a surface at
+ *     under 0.01 degrees); where two of a plane's rectangles meet, their overlap of 5% of a
+ *     cell covers it down to about 1e-3. (A plane evenly covered by discs is one rectangle.)
+ *  The tests check both distances and grazing landings.
  *
  *  Segments are traced as occlusion rays (the filter sees every candidate and nothing needs
  *  the closest hit: 15% faster than intersection rays; single rays beat 8-wide packets here
@@ -112,6 +120,11 @@ private:
         std::uint32_t columns = 0, rows = 0;
         std::uint32_t firstCell = 0; ///< its cells' ranges start at mCellStart[firstCell]
     };
+    /// A rectangle of one plane's cells, (u, v) corners.
+    struct Rectangle {
+        std::uint32_t plane = 0;
+        glm::vec2 lo{0.f}, hi{0.f};
+    };
     /// What build() makes before anything is committed (so a failure changes nothing).
     struct Layout;
 
@@ -131,7 +144,7 @@ private:
     Motion mMotion;
     SceneHandle mScene;
     GeometryHandle mGeometry;      ///< oriented-disc points
-    GeometryHandle mPlaneGeometry; ///< the patches' rectangles (quads)
+    GeometryHandle mPlaneGeometry; ///< the patches' rectangles (triangles)
     float mRadius = 0.f;
     /// Around every disc, with room for the widening and the segments' slack (traceChunk).
     glm::dvec3 mBoxMin{0.0}, mBoxMax{0.0};
@@ -144,15 +157,15 @@ private:
     std::vector<glm::vec3> mPointNormals;
     std::vector<std::uint32_t> mPointIds;
     /// Plane patches: discs sorted by (plane, row, column), each cell's range in
-    /// mCellStart (one entry past the last cell), each rectangle's plane, and Embree's
-    /// rectangle corners (16-byte rows) and indices.
+    /// mCellStart (one entry past the last cell), the rectangles, and Embree's triangles of
+    /// them (two per rectangle; vertices in 16-byte rows).
     std::vector<Plane> mPlanes;
     std::vector<std::uint32_t> mCellStart;
     std::vector<std::uint32_t> mCellDiscs;
     std::vector<glm::vec3> mCellCenters;
-    std::vector<std::uint32_t> mQuadPlane;
-    std::vector<glm::vec4> mQuadCorners;
-    std::vector<glm::uvec4> mQuadIndices;
+    std::vector<Rectangle> mRectangles;
+    std::vector<glm::vec4> mPatchVertices;
+    std::vector<glm::uvec3> mPatchTriangles;
     /// Per chunk: the pairs it found as (position in the query << 32 | disc).
     std::vector<std::vector<std::uint64_t>> mChunkPairs;
 };

@@ -135,6 +135,8 @@ TEST(DetpCrossing, SegmentRangeAndRadius) {
         crossesDisc({0.f, 0.f, 1.f}, down, 1.f - 2.f * kDiscEndTolerance * 0.1f, center, up, 0.1f));
     // A segment that starts below the plane never reaches it.
     EXPECT_FALSE(crossesDisc({0.f, 0.f, -0.5f}, down, kInf, center, up, 0.1f));
+    // A length that is not a number is no segment: never a crossing.
+    EXPECT_FALSE(crossesDisc({0.f, 0.f, 1.f}, down, std::nanf(""), center, up, 0.1f));
     // Radius: inclusive at r, exclusive beyond.
     EXPECT_TRUE(crossesDisc({0.0999f, 0.f, 1.f}, down, 2.f, center, up, 0.1f));
     EXPECT_FALSE(crossesDisc({0.1001f, 0.f, 1.f}, down, 2.f, center, up, 0.1f));
