@@ -3,16 +3,14 @@
 // 4 standard errors, the estimate's own spread (a false alarm rate of 6e-5 per channel).
 
 #include "tests/reference/IrradianceReference.h"
+#include "test_detp_world.h"
 
 #include "components/LightStandIn.h"
 #include "components/DirectionalLight.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
-#include "components/MobileMesh.h"
-#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
-#include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
@@ -87,15 +85,8 @@ struct TestScene {
 
     Entity addMesh(Mesh mesh, const Material& m, const glm::mat4& world = glm::mat4(1.f),
                    bool mobile = false) {
-        const Entity e = registry.create();
-        registry.emplace<Name>(e, "mesh");
-        registry.emplace<Mesh>(e, std::move(mesh));
+        const Entity e = test::addReceiverMesh(registry, std::move(mesh), world, mobile, "mesh");
         registry.emplace<Material>(e, m);
-        registry.emplace<WorldTransform>(e, world);
-        if (mobile)
-            registry.emplace<MobileMesh>(e);
-        else
-            registry.emplace<StaticMesh>(e);
         return e;
     }
     template <typename Light> Entity addLight(const Light& light, const glm::mat4& world) {
