@@ -267,12 +267,14 @@ bool RayScene::setMobilePose(Entity mobile, const glm::mat4& pose) {
     return true;
 }
 
-const glm::mat4& RayScene::mobilePose(Entity mobile) const {
-    const auto it = mMobileIndex.find(mobile);
-    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
+const RayScene::Mobile& RayScene::mobileOf(Entity entity) const {
+    const auto it = mMobileIndex.find(entity);
+    QGI_ASSERT(it != mMobileIndex.end(), "entity ", entity.index,
                " is not a mobile of the ray scene");
-    return mMobiles[it->second].pose;
+    return mMobiles[it->second];
 }
+
+const glm::mat4& RayScene::mobilePose(Entity mobile) const { return mobileOf(mobile).pose; }
 
 Hit RayScene::makeHit(const RTCHit& hit, float t) const {
     Hit out;
@@ -402,12 +404,10 @@ std::optional<Hit> RayScene::intersectMobile(Entity mobile, const glm::mat4& pos
 
 std::optional<Hit> RayScene::intersectMobileLocal(Entity mobile, const glm::mat4& toObject,
                                                   const Ray& objectRay) const {
-    const auto it = mMobileIndex.find(mobile);
-    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
-               " is not a mobile of the ray scene");
+    const Mobile& m = mobileOf(mobile);
     RTCIntersectContext context = newContext();
     RTCRayHit rh = toEmbree(objectRay);
-    rtcIntersect1(mMobiles[it->second].scene.get(), &context, &rh);
+    rtcIntersect1(m.scene.get(), &context, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return std::nullopt;
     Hit hit;
     hit.t = rh.ray.tfar;
@@ -420,12 +420,9 @@ std::optional<Hit> RayScene::intersectMobileLocal(Entity mobile, const glm::mat4
 }
 
 bool RayScene::occludedByMobile(Entity mobile, const Ray& objectRay) const {
-    const auto it = mMobileIndex.find(mobile);
-    QGI_ASSERT(it != mMobileIndex.end(), "entity ", mobile.index,
-               " is not a mobile of the ray scene");
     RTCIntersectContext context = newContext();
     RTCRayHit rh = toEmbree(objectRay);
-    rtcOccluded1(mMobiles[it->second].scene.get(), &context, &rh.ray);
+    rtcOccluded1(mobileOf(mobile).scene.get(), &context, &rh.ray);
     return rh.ray.tfar < 0.f; // Embree sets tfar to -inf on a hit
 }
 

@@ -126,6 +126,8 @@ private:
 
     SceneHandle newScene(RTCBuildQuality quality, RTCSceneFlags extraFlags) const;
     bool placeMobile(Mobile& mobile, const glm::mat4& pose);
+    /// The mobile of `entity`, which must be one (asserted).
+    const Mobile& mobileOf(Entity entity) const;
     Hit makeHit(const RTCHit& hit, float t) const;
     std::optional<Hit> intersectWithFilter(const Ray& ray, AcceptFn accept, void* user) const;
     bool occludedWithFilter(const Ray& ray, AcceptFn accept, void* user) const;

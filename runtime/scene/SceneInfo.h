@@ -29,6 +29,26 @@ struct Aabb {
     glm::vec3 extent() const { return max - min; }
 };
 
+/// The part [near, far] of origin + t * direction, t in [near, far] on entry, inside the box
+/// [low, high] (slab test); empty when near > far on return. T is the arithmetic: double
+/// where the clipped ends must not add float rounding (DiscIndex starts Embree's rays there).
+template <typename T, typename Vec>
+std::pair<T, T> clipToBox(const glm::vec3& origin, const glm::vec3& direction, T near, T far,
+                          const Vec& low, const Vec& high) {
+    for (int axis = 0; axis < 3; ++axis) {
+        if (direction[axis] == 0.f) {
+            if (origin[axis] < low[axis] || origin[axis] > high[axis]) return {T(1), T(0)};
+            continue;
+        }
+        T t0 = (T(low[axis]) - T(origin[axis])) / T(direction[axis]);
+        T t1 = (T(high[axis]) - T(origin[axis])) / T(direction[axis]);
+        if (t0 > t1) std::swap(t0, t1);
+        near = std::max(near, t0);
+        far = std::min(far, t1);
+    }
+    return {near, far};
+}
+
 /// Whether origin + t * direction meets `box` for some t in [0, length] (slab test; t and
 /// length in units of |direction|). An axis the direction does not move along needs the
 /// origin inside the box's slab on that axis.

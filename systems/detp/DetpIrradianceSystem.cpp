@@ -29,7 +29,6 @@ constexpr std::size_t kVertexGrain = 256;
 /// Candidate paths per task when listing the segments that reach a moved mobile's discs.
 constexpr std::size_t kPathGrain = 2048;
 
-
 } // namespace
 
 DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSettings(settings) {

@@ -2,6 +2,7 @@
 
 #include "runtime/core/Error.h"
 #include "runtime/raytrace/EmbreeDevice.h"
+#include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/common.hpp>
@@ -447,20 +448,12 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
         // then clipped to the box around the discs. In double: Embree's ray starts where the
         // clipped part does, so that a segment from far away (a distant light) is traced from
         // near the discs and Embree's rounding stays that of the scene's scale.
-        double start = (query.beyond ? std::max(0.0, double(query.beyond[k]) + endTolerance)
-                                     : 0.0) - slack;
-        double stop = double(segments.length[s]) + endTolerance + slack; // +inf stays +inf
-        bool outside = false;
-        for (int a = 0; a < 3; ++a) {
-            if (d[a] == 0.f) {
-                outside = outside || o[a] < mBoxMin[a] || o[a] > mBoxMax[a];
-                continue;
-            }
-            const double t0 = (mBoxMin[a] - o[a]) / d[a], t1 = (mBoxMax[a] - o[a]) / d[a];
-            start = std::max(start, std::min(t0, t1));
-            stop = std::min(stop, std::max(t0, t1));
-        }
-        if (outside || !(start <= stop)) continue; // misses the box: no disc to cross
+        const auto [start, stop] = clipToBox(
+            o, d,
+            (query.beyond ? std::max(0.0, double(query.beyond[k]) + endTolerance) : 0.0) - slack,
+            double(segments.length[s]) + endTolerance + slack, // +inf stays +inf
+            mBoxMin, mBoxMax);
+        if (!(start <= stop)) continue; // misses the box: no disc to cross
         RTCRay ray;
         ray.org_x = float(o.x + start * d.x);
         ray.org_y = float(o.y + start * d.y);

@@ -24,24 +24,6 @@ constexpr std::size_t kMaxChunkOffsets = std::size_t(1) << 24;
 // Changed paths per task when computing their extents.
 constexpr std::size_t kExtentGrain = 256;
 
-/// The part of origin + t direction, t in [0, length], inside the box: [near, far] (empty
-/// when near > far).
-std::pair<float, float> clipToBox(const glm::vec3& o, const glm::vec3& d, float length,
-                                  const glm::vec3& low, const glm::vec3& high) {
-    float near = 0.f, far = length;
-    for (int axis = 0; axis < 3; ++axis) {
-        if (d[axis] == 0.f) {
-            if (o[axis] < low[axis] || o[axis] > high[axis]) return {1.f, 0.f};
-            continue;
-        }
-        float t0 = (low[axis] - o[axis]) / d[axis], t1 = (high[axis] - o[axis]) / d[axis];
-        if (t0 > t1) std::swap(t0, t1);
-        near = std::max(near, t0);
-        far = std::min(far, t1);
-    }
-    return {near, far};
-}
-
 /// Coordinate of the end of origin + t direction, t in [0, length], along one axis
 /// (length +inf: the ray's limit, +-inf or the origin's own coordinate).
 float endCoordinate(float origin, float direction, float length) {
@@ -148,7 +130,7 @@ void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t fir
             }
         }
         // Clip to the box; whatever is cut off lies beyond one side or more.
-        const auto [near, far] = clipToBox(o, d, length, glm::vec3(0.f), size);
+        const auto [near, far] = clipToBox(o, d, 0.f, length, glm::vec3(0.f), size);
         for (int axis = 0; axis < 3; ++axis) {
             const float end = endCoordinate(o[axis], d[axis], length);
             const std::uint8_t sides =
@@ -229,7 +211,7 @@ PhotonPathGrid::Extent PhotonPathGrid::extentOf(const PhotonStore& store, std::u
         const glm::vec3& o = store.segments.origin[s];
         const glm::vec3& d = store.segments.direction[s];
         const float length = store.segments.length[s];
-        const auto [near, far] = clipToBox(o, d, length, mBounds.min, mBounds.max);
+        const auto [near, far] = clipToBox(o, d, 0.f, length, mBounds.min, mBounds.max);
         if (near > 0.f || far < length)
             for (int axis = 0; axis < 3; ++axis)
                 extent.outside |= sidesBeyond(o[axis], endCoordinate(o[axis], d[axis], length),
