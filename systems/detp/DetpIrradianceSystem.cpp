@@ -255,8 +255,8 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
         const auto& receiver = mReceivers.receivers()[mobiles[j]];
         accumulateDiscs(*mMobileDiscs[mobiles[j]], receiver.firstVertex, store.segments,
                         mSegmentList, {}, 1.0, false);
-        for (std::uint32_t v = receiver.firstVertex; v < receiver.firstVertex + receiver.vertexCount;
-             ++v)
+        const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
+        for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
             mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
     }
 }

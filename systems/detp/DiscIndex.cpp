@@ -101,7 +101,9 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
     struct Keyed {
         std::array<std::uint32_t, 4> key; // normal's bits, coordinate's bits
         std::uint32_t disc;
-        bool operator<(const Keyed& o) const { return std::tie(key, disc) < std::tie(o.key, o.disc); }
+        bool operator<(const Keyed& o) const {
+            return std::tie(key, disc) < std::tie(o.key, o.disc);
+        }
     };
     std::vector<Keyed> keyed;
     std::vector<std::uint8_t> planar(centers.size(), 0);

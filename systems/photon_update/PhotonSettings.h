@@ -39,8 +39,9 @@ struct PhotonSettings {
     /// still is not), the photon reflects exactly as it did (same point, normal, albedo and
     /// random numbers), so the rest of its path is kept up to its next affected segment
     /// instead of being re-traced. Only the moved mobiles are traced for this, and not at all
-    /// when the plane hit slid along the segment (a face moving along its normal). Off: the seed's rule, every
-    /// affected path re-traced from its first affected segment (bit-identical to a fresh shot).
+    /// when the plane hit slid along the segment (a face moving along its normal). Off: the
+    /// seed's rule, every affected path re-traced from its first affected segment
+    /// (bit-identical to a fresh shot).
     bool reuseLandedPaths = true;
     /// Re-shoot every photon every frame (PhotonDelta::full): the baseline to compare against.
     bool fullRecompute = false;

@@ -5,6 +5,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
+#include "runtime/math/Distance.h"
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
@@ -23,14 +24,6 @@
 
 namespace qgi {
 namespace {
-
-/// Distance from c to the segment [a, b].
-float distanceToSegment(const glm::vec3& c, const glm::vec3& a, const glm::vec3& b) {
-    const glm::vec3 ab = b - a;
-    const float len2 = glm::dot(ab, ab);
-    const float t = len2 > 0.f ? std::clamp(glm::dot(c - a, ab) / len2, 0.f, 1.f) : 0.f;
-    return glm::length(a + t * ab - c);
-}
 
 // queueShadowed culls the grid's cells in blocks of this many per axis before testing cells.
 constexpr int kCullBlock = 8;

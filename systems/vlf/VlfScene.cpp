@@ -11,6 +11,7 @@
 #include "runtime/core/Error.h"
 #include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Distance.h"
 #include "systems/vlf/DirectionSet.h"
 
 #include <glm/geometric.hpp>
@@ -243,13 +244,8 @@ float distanceToTriangle(const glm::vec3& p, const glm::vec3& a, const glm::vec3
         glm::dot(glm::cross(a - c, p - c), n) >= 0.f)
         return std::abs(glm::dot(p - a, n)) / std::sqrt(n2);
     // Otherwise the nearest point lies on an edge.
-    const auto segment = [&](const glm::vec3& s0, const glm::vec3& s1) {
-        const glm::vec3 e = s1 - s0;
-        const float t =
-            std::clamp(glm::dot(p - s0, e) / std::max(glm::dot(e, e), 1e-30f), 0.f, 1.f);
-        return glm::length(p - (s0 + t * e));
-    };
-    return std::min({segment(a, b), segment(b, c), segment(c, a)});
+    return std::min({distanceToSegment(p, a, b), distanceToSegment(p, b, c),
+                     distanceToSegment(p, c, a)});
 }
 
 } // namespace
