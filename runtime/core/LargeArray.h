@@ -24,14 +24,12 @@ namespace qgi {
  *  Every user writes what it grows before reading it (the tracer's output, re-traced paths,
  *  compaction, the grid's id lists), and zeroing 100 MiB it is about to overwrite cost the
  *  tracer about 2 % of its time. */
-template <typename T>
-struct LargeArrayAllocator {
+template <typename T> struct LargeArrayAllocator {
     using value_type = T;
     static constexpr std::size_t kHugePage = std::size_t(2) << 20;
 
     LargeArrayAllocator() noexcept = default;
-    template <typename U>
-    LargeArrayAllocator(const LargeArrayAllocator<U>&) noexcept {}
+    template <typename U> LargeArrayAllocator(const LargeArrayAllocator<U>&) noexcept {}
 
     T* allocate(std::size_t n) {
         if (n > std::size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
@@ -50,8 +48,7 @@ struct LargeArrayAllocator {
     void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
         ::new (static_cast<void*>(p)) U;
     }
-    template <typename U, typename... Args>
-    void construct(U* p, Args&&... args) {
+    template <typename U, typename... Args> void construct(U* p, Args&&... args) {
         ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
     }
     void deallocate(T* p, std::size_t n) noexcept {
@@ -68,7 +65,6 @@ bool operator==(const LargeArrayAllocator<T>&, const LargeArrayAllocator<U>&) no
 }
 
 /// A std::vector in LargeArrayAllocator memory.
-template <typename T>
-using LargeArray = std::vector<T, LargeArrayAllocator<T>>;
+template <typename T> using LargeArray = std::vector<T, LargeArrayAllocator<T>>;
 
 } // namespace qgi

@@ -274,7 +274,9 @@ const RayScene::Mobile& RayScene::mobileOf(Entity entity) const {
     return mMobiles[it->second];
 }
 
-const glm::mat4& RayScene::mobilePose(Entity mobile) const { return mobileOf(mobile).pose; }
+const glm::mat4& RayScene::mobilePose(Entity mobile) const {
+    return mobileOf(mobile).pose;
+}
 
 Hit RayScene::makeHit(const RTCHit& hit, float t) const {
     Hit out;

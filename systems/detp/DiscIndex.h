@@ -112,11 +112,11 @@ private:
 
     /// Discs sharing one axis-aligned plane, and the grid that holds them.
     struct Plane {
-        std::uint8_t axis = 0;      ///< the normal is plus or minus this axis
-        std::uint8_t u = 1, v = 2;  ///< the other two axes, the grid's columns and rows
-        float coordinate = 0.f;     ///< of every centre along `axis`
-        glm::vec3 normal{0.f};      ///< every one of its discs' normal, bit for bit
-        glm::vec2 corner{0.f};      ///< (u, v) of the grid's first cell's corner
+        std::uint8_t axis = 0;     ///< the normal is plus or minus this axis
+        std::uint8_t u = 1, v = 2; ///< the other two axes, the grid's columns and rows
+        float coordinate = 0.f;    ///< of every centre along `axis`
+        glm::vec3 normal{0.f};     ///< every one of its discs' normal, bit for bit
+        glm::vec2 corner{0.f};     ///< (u, v) of the grid's first cell's corner
         std::uint32_t columns = 0, rows = 0;
         std::uint32_t firstCell = 0; ///< its cells' ranges start at mCellStart[firstCell]
     };

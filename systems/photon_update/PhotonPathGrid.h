@@ -1,7 +1,7 @@
 #pragma once
 
-#include "runtime/scene/SceneInfo.h"
 #include "runtime/core/LargeArray.h"
+#include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/vec3.hpp>

@@ -382,19 +382,17 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
         scratch.relabels.clear();
         scratch.kept = scratch.checked = 0;
     }
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                          LandingScratch& scratch = mLandingScratch.local();
-                          walkPathsPrefetched(store, mCandidates, range.begin(), range.end(),
-                                              [&](std::size_t i) {
-                                                  mFirstAffected[i] =
-                                                      testBit(mReshooting, mCandidates[i])
-                                                          ? -1
-                                                          : firstToRetrace(scene, store,
-                                                                           mCandidates[i],
-                                                                           tolerance, scratch);
-                                              });
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, mCandidates.size(), kTestGrain),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+            LandingScratch& scratch = mLandingScratch.local();
+            walkPathsPrefetched(store, mCandidates, range.begin(), range.end(), [&](std::size_t i) {
+                mFirstAffected[i] =
+                    testBit(mReshooting, mCandidates[i])
+                        ? -1
+                        : firstToRetrace(scene, store, mCandidates[i], tolerance, scratch);
+            });
+        });
     for (const LandingScratch& scratch : mLandingScratch) {
         mRelabels.insert(mRelabels.end(), scratch.relabels.begin(), scratch.relabels.end());
         mStats.landedPaths += scratch.kept;
@@ -449,8 +447,8 @@ PhotonUpdateSystem::mayLand(const PhotonSegments& segments, std::size_t s, float
     return nullptr;
 }
 
-bool PhotonUpdateSystem::lands(const RayScene& scene, const PhotonSegments& segments,
-                               std::size_t s, const MovedMobile& mobile, float tolerance,
+bool PhotonUpdateSystem::lands(const RayScene& scene, const PhotonSegments& segments, std::size_t s,
+                               const MovedMobile& mobile, float tolerance,
                                std::uint32_t& primitive) const {
     // The mobile at its new pose must meet the ray first on the same plane at the same
     // distance (within the tolerance), and no other moved mobile may cross the segment first.
@@ -459,9 +457,9 @@ bool PhotonUpdateSystem::lands(const RayScene& scene, const PhotonSegments& segm
     const glm::vec3& o = segments.origin[s];
     const glm::vec3& d = segments.direction[s];
     const float length = segments.length[s];
-    const std::optional<Hit> hit = scene.intersectMobileLocal(
-        mobile.entity, mobile.toObject,
-        mobile.toLocal(o, d, std::numeric_limits<float>::infinity()));
+    const std::optional<Hit> hit =
+        scene.intersectMobileLocal(mobile.entity, mobile.toObject,
+                                   mobile.toLocal(o, d, std::numeric_limits<float>::infinity()));
     if (!hit || !(std::abs(hit->t - length) <= tolerance) ||
         !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
         return false;

@@ -102,7 +102,7 @@ private:
         glm::mat4 toObject{1.f}; ///< its inverse
         /// Object-space normals to world space (not normalised: only signs and ratios count).
         glm::mat3 normalMatrix{1.f};
-        glm::vec3 shift{0.f}; ///< new minus old translation
+        glm::vec3 shift{0.f};    ///< new minus old translation
         Aabb objectBox;          ///< object-space bounds, slightly widened
         Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
         /// The mobile, when the linear part of its pose is unchanged (it only translated);

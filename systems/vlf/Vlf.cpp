@@ -148,8 +148,7 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
         // Triangles of a face do not overlap, so the sums stay within [0, 1] up to rounding;
         // a texel touched only along an edge or a corner (area below 1e-6) holds nothing.
         for (std::size_t tx = 0; tx < area.size(); ++tx)
-            v.mCoverage[m.firstTexel + tx] =
-                area[tx] < 1e-6 ? 0.f : float(std::min(area[tx], 1.0));
+            v.mCoverage[m.firstTexel + tx] = area[tx] < 1e-6 ? 0.f : float(std::min(area[tx], 1.0));
     }
 
     // Tiles: a specular face gets tile (s, t) of subfield i when its projection comes within

@@ -244,8 +244,8 @@ float distanceToTriangle(const glm::vec3& p, const glm::vec3& a, const glm::vec3
         glm::dot(glm::cross(a - c, p - c), n) >= 0.f)
         return std::abs(glm::dot(p - a, n)) / std::sqrt(n2);
     // Otherwise the nearest point lies on an edge.
-    return std::min({distanceToSegment(p, a, b), distanceToSegment(p, b, c),
-                     distanceToSegment(p, c, a)});
+    return std::min(
+        {distanceToSegment(p, a, b), distanceToSegment(p, b, c), distanceToSegment(p, c, a)});
 }
 
 } // namespace

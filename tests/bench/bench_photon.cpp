@@ -222,9 +222,9 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
-    double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0, trace = 0, grid = 0,
-           detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0, mobileSegments = 0,
-           crossings = 0, deltaSegments = 0;
+    double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
+           trace = 0, grid = 0, detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0,
+           mobileSegments = 0, crossings = 0, deltaSegments = 0;
     for (auto _ : state) {
         detp += w.step();
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();

@@ -92,7 +92,8 @@ int run(const Options& options) {
     const auto samples = reference::openStaticVertices(world, rays, 0.01f, options.vertices);
     std::fprintf(stderr, "reference: %zu vertices x %u paths ...\n", samples.size(),
                  options.referencePaths);
-    const auto expected = reference::photonReferenceAt(world, rays, samples, options.referencePaths);
+    const auto expected =
+        reference::photonReferenceAt(world, rays, samples, options.referencePaths);
 
     const std::unique_ptr<vlf::VlfScene> scene = vlf::VlfScene::fromRegistry(world);
     // The face whose triangles hold each vertex (a plane-and-rectangle test picks the wrong
@@ -127,7 +128,8 @@ int run(const Options& options) {
                 estimates.push_back(std::nan("")); // on no face: left out
                 continue;
             }
-            const glm::vec3 e = field.sampleTexels(field.irradiance(), *faceOf[i], samples[i].position);
+            const glm::vec3 e =
+                field.sampleTexels(field.irradiance(), *faceOf[i], samples[i].position);
             estimates.push_back(double(e.r) + e.g + e.b);
         }
         const reference::ErrorSummary errors = reference::summariseErrors(estimates, references);

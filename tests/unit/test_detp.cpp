@@ -14,9 +14,9 @@
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 
-#include <gmock/gmock.h>
 #include "test_detp_world.h"
 #include "test_meshes.h"
+#include <gmock/gmock.h>
 
 #include <gtest/gtest.h>
 
@@ -109,7 +109,7 @@ TEST(Detp, PointLightOverABlackPlane) {
     // A 2 x 2 quad floor over [-1, 1]^2 at y = 0: vertex 4 is the foot of the light.
     const Entity floor =
         addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
-                kIdentity, false, "floor");
+                        kIdentity, false, "floor");
     ASSERT_EQ(registry.get<Mesh>(floor).positions[4], glm::vec3(0.f));
 
     // Isotropic photons; those heading down end on the plane, the rest leave the scene.
@@ -182,7 +182,7 @@ TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
     addDetpResources(registry);
     const Entity floor =
         addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
-                kIdentity, false, "floor");
+                        kIdentity, false, "floor");
     DetpSettings settings;
     settings.discRadius = float(kRadius);
     DetpIrradianceSystem system(settings);
@@ -219,7 +219,7 @@ TEST(Detp, SegmentsFromBehindDoNotCount) {
     addDetpResources(registry);
     const Entity floor =
         addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
-                kIdentity, false, "floor");
+                        kIdentity, false, "floor");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     const Segment fromBelow{{0.f, -1.f, 0.f}, {0.f, 1.f, 0.f}, kInf, glm::vec3(3.f), {}, 0, 1};
     appendPath(store, std::span(&fromBelow, 1));
@@ -242,7 +242,7 @@ TEST(Detp, HybridModeSkipsOnlyTheSegmentsThatLeaveAPunctualLight) {
     addDetpResources(registry);
     const Entity floor =
         addReceiverMesh(registry, gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 2),
-                kIdentity, false, "floor");
+                        kIdentity, false, "floor");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     store.lights = {PhotonLight{{}, glm::vec3(2.f), 2, true},    // a point light
                     PhotonLight{{}, glm::vec3(7.f), 1, false}};  // an emissive surface
@@ -308,13 +308,15 @@ struct IncrementalWorld {
 
     IncrementalWorld() {
         addDetpResources(registry);
-        floor = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
-                        kIdentity, false, "floor");
-        wall = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
-                       kIdentity, false, "wall");
-        plate = addReceiverMesh(registry,
-                        gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
-                        glm::translate(kIdentity, {0.5f, 0.3f, 0.5f}), true, "plate");
+        floor = addReceiverMesh(registry,
+                                gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
+                                kIdentity, false, "floor");
+        wall = addReceiverMesh(registry,
+                               gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
+                               kIdentity, false, "wall");
+        plate = addReceiverMesh(
+            registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
+            glm::translate(kIdentity, {0.5f, 0.3f, 0.5f}), true, "plate");
     }
 };
 
@@ -570,10 +572,10 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     addDetpResources(registry);
     const Entity floor =
         addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 4.f}, {4.f, 0.f, 0.f}, 40),
-                kIdentity, false, "floor");
-    const Entity plate =
-        addReceiverMesh(registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
-                glm::translate(kIdentity, {1.f, 0.5f, 1.f}), true, "plate");
+                        kIdentity, false, "floor");
+    const Entity plate = addReceiverMesh(
+        registry, gridMesh({-0.25f, 0.f, -0.25f}, {0.f, 0.f, 0.5f}, {0.5f, 0.f, 0.f}, 8),
+        glm::translate(kIdentity, {1.f, 0.5f, 1.f}), true, "plate");
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     std::mt19937 rng(3);
     std::uniform_real_distribution<float> unit(0.f, 1.f);
@@ -691,8 +693,8 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
 
     Registry registry;
     addDetpResources(registry);
-    addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2), kIdentity,
-            false, "floor");
+    addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2),
+                    kIdentity, false, "floor");
     DetpIrradianceSystem system(DetpSettings{});
     EXPECT_THROW(system.build(registry), Error); // radius 0 and no SceneInfo
     registry.ctx().emplace<SceneInfo>().maxEdgeLength = 0.35f;

@@ -329,8 +329,8 @@ TEST(DetpDiscIndex, AxisAlignedPlanesMatchBruteForce) {
     index.collectCrossings(segments, indices, actual, beyond);
     std::vector<DiscCrossing> cutExpected;
     for (const DiscCrossing& c : expected) {
-        const std::size_t k = std::size_t(
-            std::find(indices.begin(), indices.end(), c.segment) - indices.begin());
+        const std::size_t k =
+            std::size_t(std::find(indices.begin(), indices.end(), c.segment) - indices.begin());
         if (!crossesDisc(segments.origin[c.segment], segments.direction[c.segment], beyond[k],
                          discs.centers[c.disc], discs.normals[c.disc], kRadius))
             cutExpected.push_back(c);

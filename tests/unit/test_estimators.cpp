@@ -202,7 +202,7 @@ TEST(PhotonMap, BorderBiasAgainstDetp) {
     addDetpResources(registry);
     const Entity square =
         addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
-                kIdentity, false);
+                        kIdentity, false);
     PhotonStore& store = registry.ctx().get<PhotonStore>();
     std::mt19937_64 rng(11);
     std::uniform_real_distribution<float> beam(-0.5f, 1.5f);
@@ -262,10 +262,12 @@ struct ImpactWorld {
 
     ImpactWorld() {
         addDetpResources(registry);
-        floor = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
-                        kIdentity, false);
-        plate = addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 0.2f}, {0.2f, 0.f, 0.f}, 4),
-                        glm::translate(kIdentity, {0.4f, 0.3f, 0.4f}), true);
+        floor = addReceiverMesh(registry,
+                                gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+                                kIdentity, false);
+        plate = addReceiverMesh(registry,
+                                gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 0.2f}, {0.2f, 0.f, 0.f}, 4),
+                                glm::translate(kIdentity, {0.4f, 0.3f, 0.4f}), true);
         other = registry.create(); // hit by photons but not a receiver: an avatar, say
         receivers.build(registry);
     }

@@ -15,7 +15,7 @@ namespace {
 TEST(LargeArray, SmallAndLargeBlocksHoldTheirValuesThroughGrowth) {
     LargeArray<std::uint32_t> values;
     constexpr std::size_t kBig = (std::size_t(5) << 20) / sizeof(std::uint32_t); // 5 MiB
-    for (std::uint32_t i = 0; i < 1000; ++i) // small blocks
+    for (std::uint32_t i = 0; i < 1000; ++i)                                     // small blocks
         values.push_back(i * 3u);
     values.resize(kBig); // crosses into huge-page blocks, copying the small one
     std::iota(values.begin() + 1000, values.end(), 3000u);

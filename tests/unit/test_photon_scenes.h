@@ -3,8 +3,6 @@
 
 #include "components/Material.h"
 #include "components/Mesh.h"
-#include "test_detp_world.h"
-#include "test_meshes.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/PointLight.h"
@@ -15,6 +13,8 @@
 #include "runtime/raytrace/RayScene.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
+#include "test_detp_world.h"
+#include "test_meshes.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>

@@ -433,8 +433,7 @@ TEST(PhotonUpdate, ALandingIsBlockedByAnotherMovedMobileInTheWay) {
         const std::vector<int> expected = bruteForceFirstAffected(
             before, scene, {{room.cube, cubePose}, {room.crate, cratePose}}, [&](std::size_t s) {
                 for (const Entity mobile : {room.cube, room.crate})
-                    if (landsAgain(before, scene, s, mobile, registry.get<Mesh>(mobile),
-                                   tolerance))
+                    if (landsAgain(before, scene, s, mobile, registry.get<Mesh>(mobile), tolerance))
                         return true;
                 return false;
             });
@@ -449,9 +448,9 @@ TEST(PhotonUpdate, ALandingIsBlockedByAnotherMovedMobileInTheWay) {
         for (std::size_t seg = 0; seg < old.size(); ++seg)
             if (old.hitEntity[seg] == room.cube && old.direction[seg].y < 0.f &&
                 old.origin[seg].y > kCubeRest.y + 1.f &&
-                scene.intersectMobile(room.crate, cratePose,
-                                      Ray{old.origin[seg], 0.f, old.direction[seg],
-                                          old.length[seg]}))
+                scene.intersectMobile(
+                    room.crate, cratePose,
+                    Ray{old.origin[seg], 0.f, old.direction[seg], old.length[seg]}))
                 ++blocked;
     }
     EXPECT_GT(landed, 500u);

@@ -521,9 +521,9 @@ TEST(RayScene, OccludedByMobileAnswersWhetherIntersectMobileHits) {
     for (int i = 0; i < 20'000; ++i) {
         // From anywhere, aimed within about a box size of the crate: hits and near misses.
         const glm::vec3 origin(coordinate(rng), coordinate(rng), coordinate(rng) + 1.f);
-        const glm::vec3 target = glm::vec3(pose[3]) + 0.5f * glm::vec3(coordinate(rng),
-                                                                     coordinate(rng),
-                                                                     coordinate(rng));
+        const glm::vec3 target =
+            glm::vec3(pose[3]) +
+            0.5f * glm::vec3(coordinate(rng), coordinate(rng), coordinate(rng));
         if (glm::length(target - origin) < 1e-3f) continue;
         const glm::vec3 direction = glm::normalize(target - origin);
         const float tfar = length(rng);

@@ -2,11 +2,11 @@
 // a point is exact (no sampling), so those cases allow only float rounding; sampled cases allow
 // 4 standard errors, the estimate's own spread (a false alarm rate of 6e-5 per channel).
 
-#include "tests/reference/IrradianceReference.h"
 #include "test_detp_world.h"
+#include "tests/reference/IrradianceReference.h"
 
-#include "components/LightStandIn.h"
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/PointLight.h"

@@ -593,7 +593,6 @@ TEST(VlfBake, NonPlanarQuadsReadPiLeThroughTheFaceThatHoldsThePoint) {
     }
 }
 
-
 TEST(VlfBake, FaceAtPrefersTheNearestOfStackedFaces) {
     // A 10 cm lamp hung 0.5 mm below a 2 m ceiling, both facing down (cornell's luminaire):
     // both planes lie within the 1 mm tolerance of a point on the lamp, and the ceiling's
