@@ -29,7 +29,8 @@ GoldenCheck checkGolden(const std::filesystem::path& golden, const ImageF& fresh
     }
     std::size_t differ = 0;
     for (std::size_t i = 0; i < fresh.rgba.size(); ++i)
-        differ += std::abs(stored.rgba[i] - fresh.rgba[i]) > 1e-5f * std::abs(fresh.rgba[i]);
+        // Written so that a NaN on either side counts as a difference.
+        differ += !(std::abs(stored.rgba[i] - fresh.rgba[i]) <= 1e-5f * std::abs(fresh.rgba[i]));
     EXPECT_LE(double(differ) / double(fresh.rgba.size()), 1e-3) << golden;
     return GoldenCheck::Compared;
 }

@@ -436,6 +436,84 @@ TEST(Reference, BounceCapTruncatesTheSeries) {
     }
 }
 
+// ---- one reflection off a Lambertian floor ---------------------------------------------------
+//
+// The white furnace checks reflected light only where radiance is uniform, which a wrong
+// bounce-direction density or weight can still get right. Here the reflected radiance varies
+// over the floor, and the answers come from a 1D quadrature and from a closed form.
+
+/// Composite Simpson's rule for f over [a, b] with n (even) intervals.
+template <typename F> double simpson(F&& f, double a, double b, int n) {
+    const double step = (b - a) / n;
+    double sum = f(a) + f(b);
+    for (int i = 1; i < n; ++i)
+        sum += (i % 2 ? 4.0 : 2.0) * f(a + i * step);
+    return sum * step / 3.0;
+}
+
+TEST(Reference, PointLightReflectedByAFloorMatchesQuadrature) {
+    // A point light of intensity I at height h over a Lambertian floor of albedo rho; a point
+    // at height H < h on the light's axis faces down, so it sees only the floor. At distance s
+    // from the axis the floor receives I h / (h^2 + s^2)^1.5 and shows radiance rho / pi times
+    // that; the point receives radiance L from dA with cos cos / d^2 = H^2 / (H^2 + s^2)^2, so
+    //   E = 2 rho I h H^2 int_0^inf s ds / ((h^2 + s^2)^1.5 (H^2 + s^2)^2),
+    // integrated here over s = H tan(phi). (The floor ends at 100 m: the integrand falls as
+    // s^-6, so the rest is below 1e-10 of the value.)
+    const glm::vec3 rho(0.8f, 0.5f, 0.2f);
+    const double h = 1.2, intensity = 2.0;
+    for (const double height : {0.3, 0.9}) {
+        SCOPED_TRACE(height);
+        TestScene scene;
+        scene.addMesh(horizontal(-100.f, 100.f, -100.f, 100.f, 0.f), material(rho));
+        scene.addLight(PointLight{glm::vec3(1.f), float(intensity)},
+                       glm::translate(glm::mat4(1.f), glm::vec3(0.f, float(h), 0.f)));
+        const double hh = height * height;
+        const double integral = simpson(
+            [&](double phi) {
+                const double s = height * std::tan(phi);
+                const double ds = height / (std::cos(phi) * std::cos(phi));
+                return s * ds / (std::pow(h * h + s * s, 1.5) * (hh + s * s) * (hh + s * s));
+            },
+            0.0, std::atan(100.0 / height), 20000);
+        const glm::dvec3 expected = 2.0 * glm::dvec3(rho) * intensity * h * hh * integral;
+        const glm::vec3 x(0.f, float(height), 0.f);
+        // Everything it receives has reflected once, so it is the same without direct light.
+        for (const bool direct : {true, false}) {
+            ReferenceSettings settings = samples(1 << 14);
+            settings.includeDirect = direct;
+            expectWithinError(scene.estimate(x, -kUp, settings), expected);
+        }
+    }
+}
+
+TEST(Reference, EmitterReflectedByAFloorIsPiRhoLe) {
+    // A black ceiling emitting Le downwards over a floor of albedo rho, both 200 m wide and
+    // 1 m apart: the floor receives pi Le and shows radiance rho Le everywhere near the
+    // centre, so a point between them facing down receives pi rho Le (and facing up, the
+    // ceiling's pi Le directly). The finite size takes about (1 m / 100 m)^2 = 1e-4 off both.
+    const glm::vec3 rho(0.8f, 0.5f, 0.2f), le(1.5f, 1.f, 0.5f);
+    TestScene scene;
+    scene.addMesh(horizontal(-100.f, 100.f, -100.f, 100.f, 0.f), material(rho));
+    scene.addMesh(horizontal(-100.f, 100.f, -100.f, 100.f, 1.f, true), material(kBlack, le));
+    const std::vector<glm::vec3> x{{0.f, 0.5f, 0.f}, {0.3f, 0.1f, -0.2f}};
+    for (const bool direct : {true, false}) {
+        SCOPED_TRACE(direct);
+        ReferenceSettings settings = samples(1 << 14);
+        settings.includeDirect = direct;
+        const std::vector<IrradianceEstimate> down = scene.estimate(x, {2, -kUp}, settings);
+        for (const IrradianceEstimate& e : down)
+            expectWithinError(e, kPi * glm::dvec3(rho) * glm::dvec3(le));
+        // Facing up: the ceiling directly, and nothing that reflected (the ceiling is black).
+        const std::vector<IrradianceEstimate> up = scene.estimate(x, {2, kUp}, settings);
+        for (const IrradianceEstimate& e : up) {
+            if (direct)
+                expectWithinError(e, kPi * glm::dvec3(le));
+            else
+                expectExact(e, glm::dvec3(0.0));
+        }
+    }
+}
+
 // ---- determinism ------------------------------------------------------------------------------
 
 TEST(Reference, SameSeedGivesIdenticalResultsOnAnyThreadCount) {
