@@ -57,7 +57,7 @@ std::vector<VertexSample> openStaticVertices(const Registry& registry, const Ray
 
 std::vector<IrradianceEstimate> photonReferenceAt(const Registry& registry, const RayScene& scene,
                                                   std::span<const VertexSample> samples,
-                                                  std::uint32_t paths) {
+                                                  std::uint32_t paths, bool includeDirect) {
     std::vector<glm::vec3> xs, ns;
     for (const VertexSample& s : samples) {
         xs.push_back(s.position);
@@ -66,6 +66,7 @@ std::vector<IrradianceEstimate> photonReferenceAt(const Registry& registry, cons
     ReferenceSettings settings;
     settings.samplesPerPoint = paths;
     settings.includeEnvironment = false;
+    settings.includeDirect = includeDirect;
     return IrradianceReference(registry, scene, settings).estimate(xs, ns);
 }
 

@@ -35,9 +35,11 @@ std::vector<VertexSample> openStaticVertices(const Registry& registry, const Ray
 
 /// The Monte Carlo reference at each sample's position and normal, `paths` paths each, without
 /// sky light (photons are not emitted by the sky, so photon transport has none either).
+/// includeDirect = false leaves out the light that reaches the point without a reflection:
+/// what photons carry in hybrid mode.
 std::vector<IrradianceEstimate> photonReferenceAt(const Registry& registry, const RayScene& scene,
                                                   std::span<const VertexSample> samples,
-                                                  std::uint32_t paths);
+                                                  std::uint32_t paths, bool includeDirect = true);
 
 /// The p-quantile (0..1) of `values` by the nearest-rank rule; 0 for an empty list.
 double percentile(std::vector<double> values, double p);
