@@ -2,35 +2,75 @@
 
 #include "components/Camera.h"
 #include "components/Material.h"
+#include "components/Name.h"
 #include "components/PathFollower.h"
+#include "components/PointCacheShaded.h"
 #include "components/StaticMesh.h"
+#include "components/Transform.h"
+#include "components/WorldTransform.h"
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
 #include "runtime/io/IrradianceExport.h"
-#include "runtime/scene/SceneQueries.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GlWindow.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneLoader.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/frame/FrameSchedule.h"
-#include "systems/vlf/VlfScene.h"
 #include "systems/sh_probes/AvatarShExport.h"
+#include "systems/vlf/VlfScene.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <unistd.h>
+
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
+#include <string>
 
 namespace qgi::demo {
 
 namespace {
 
+/// A scene without a camera (a level from a tool that keeps its cameras elsewhere) gets one
+/// beyond the +Z side of its bounds, a little above the middle, looking at the centre from far
+/// enough to see the whole scene.
+Entity addDefaultCamera(Registry& registry) {
+    const Aabb& bounds = registry.ctx().get<SceneInfo>().bounds;
+    const glm::vec3 center = bounds.empty() ? glm::vec3(0.f) : bounds.center();
+    const glm::vec3 extent = bounds.empty() ? glm::vec3(1.f) : bounds.extent();
+    Camera camera;
+    camera.active = true;
+    const float radius = std::max(0.5f * glm::length(extent), 0.01f);
+    const float distance = radius / std::tan(0.5f * camera.yfov);
+    const glm::vec3 eye = center + glm::vec3(0.f, 0.25f * extent.y, 0.5f * extent.z + distance);
+    camera.znear = std::max(1e-3f * distance, 1e-3f);
+    camera.zfar = std::max(camera.zfar, 4.f * (distance + radius));
+    Transform pose;
+    pose.translation = eye;
+    pose.rotation = glm::quatLookAt(glm::normalize(center - eye), glm::vec3(0.f, 1.f, 0.f));
+    const Entity e = registry.create();
+    registry.emplace<Name>(e, "default camera");
+    registry.emplace<Camera>(e, camera);
+    registry.emplace<Transform>(e, pose);
+    registry.emplace<WorldTransform>(e, glm::translate(glm::mat4(1.f), eye) *
+                                            glm::mat4_cast(pose.rotation));
+    logInfo("the scene has no camera: added one at (", eye.x, ", ", eye.y, ", ", eye.z,
+            ") looking at its centre");
+    return e;
+}
+
 void applyCameraPath(Registry& registry, const std::string& choice) {
-    const Entity camera = findActiveCamera(registry);
-    if (!camera) fail("scene has no camera");
+    Entity camera = findActiveCamera(registry);
+    if (!camera) camera = addDefaultCamera(registry);
     if (choice == "scene") return;
     if (choice == "none") {
         registry.remove<PathFollower>(camera);
@@ -39,8 +79,19 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
     registry.emplaceOrReplace<PathFollower>(camera, loadCameraPath(choice));
 }
 
-void ensureParentDirectory(const std::filesystem::path& base) {
-    if (base.has_parent_path()) std::filesystem::create_directories(base.parent_path());
+/// Makes sure an output's folder exists and can be written, before a long run rather than
+/// after it. Throws qgi::Error naming the option.
+void prepareOutput(const std::optional<std::string>& base, const char* option) {
+    if (!base) return;
+    const std::filesystem::path folder = std::filesystem::path(*base).has_parent_path()
+                                             ? std::filesystem::path(*base).parent_path()
+                                             : std::filesystem::path(".");
+    std::error_code error;
+    std::filesystem::create_directories(folder, error);
+    if (error)
+        fail(option, ": cannot create the folder '", folder.string(), "': ", error.message());
+    if (!std::filesystem::is_directory(folder) || ::access(folder.c_str(), W_OK) != 0)
+        fail(option, ": the folder '", folder.string(), "' is not writable");
 }
 
 /// `--vlf auto`: on when the static scene has glossy or mirror faces, but not more than 256 of
@@ -69,6 +120,11 @@ bool wantVlf(const Registry& registry) {
 
 int runDemo(const DemoOptions& options) {
     if (options.quiet) setLogLevel(LogLevel::Warning);
+    prepareOutput(options.screenshot, "--screenshot");
+    prepareOutput(options.profile, "--profile");
+    prepareOutput(options.exportScene, "--export-scene");
+    prepareOutput(options.exportIrradiance, "--export-irradiance");
+    prepareOutput(options.exportAvatars, "--export-avatars");
 
     // The window comes first: without a GL 4.5 context there is nothing to show, and the user
     // should learn that before a long scene load.
@@ -88,7 +144,6 @@ int runDemo(const DemoOptions& options) {
     }
     applyCameraPath(world, options.cameraPath);
     if (options.exportScene) {
-        ensureParentDirectory(*options.exportScene);
         exportGltf(world, *options.exportScene);
         logInfo("wrote ", *options.exportScene);
     }
@@ -103,6 +158,11 @@ int runDemo(const DemoOptions& options) {
         frameSettings.irradiance.hybrid = options.mode == "hybrid";
     } else {
         frameSettings.photons.reset();
+        if (options.mode == "photon")
+            logWarning("--photons 0 in photon mode: all light comes from photons, so only "
+                       "emissive surfaces will show");
+        if (options.exportIrradiance)
+            logWarning("--photons 0: --export-irradiance will write zero irradiance");
     }
     if (options.vlf == "on" || (options.vlf == "auto" && wantVlf(world))) {
         VlfSystemSettings vlf;
@@ -117,7 +177,15 @@ int runDemo(const DemoOptions& options) {
     }
     frameSettings.probes->hybrid = options.mode == "hybrid";
     frameSettings.probes->seed = options.seed;
-    if (options.pointCache || !options.pointCacheFile.empty() || options.showPoints) {
+    const bool pointCache =
+        options.pointCache || !options.pointCacheFile.empty() || options.showPoints;
+    const bool anyTagged = !world.view<const PointCacheShaded>().entities().empty();
+    if (pointCache && options.mode != "hybrid")
+        logWarning("--point-cache: the point cache shades hybrid mode only; not built");
+    else if (pointCache && !anyTagged)
+        logWarning("--point-cache: no surface is tagged for it (glTF node extras "
+                   "{\"pointCache\": true}); not built");
+    else if (pointCache) {
         frameSettings.pointCache = PointCacheSettings{};
         frameSettings.pointCache->seed = options.seed;
         frameSettings.pointCache->cacheFile = options.pointCacheFile;
@@ -166,29 +234,29 @@ int runDemo(const DemoOptions& options) {
 
         const bool lastFrame = options.frames != 0 && f + 1 == std::uint64_t(options.frames);
         const bool f12 = !options.headless && glfwGetKey(window.handle(), GLFW_KEY_F12) == GLFW_PRESS;
-        if (options.screenshot && (lastFrame || f12)) {
-            ensureParentDirectory(*options.screenshot);
-            frame.renderer()->requestScreenshot(*options.screenshot);
-        }
+        const bool screenshot = options.screenshot && (lastFrame || f12) && frame.renderer();
+        if (screenshot) frame.renderer()->requestScreenshot(*options.screenshot);
         frame.run(world, context);
         window.swapBuffers();
+        // A headless run exists to write its outputs: one that could not be written fails it.
+        if (screenshot && options.headless) {
+            const auto& outcome = frame.renderer()->lastScreenshot();
+            if (!outcome || !outcome->error.empty())
+                fail("--screenshot: ", outcome ? outcome->error : "no frame was rendered");
+        }
         if (options.headless && !options.quiet && (f + 1) % 60 == 0)
             logInfo("frame ", f + 1, "/", options.frames);
     }
 
-    if (options.screenshot) logInfo("wrote ", *options.screenshot, ".exr and .png");
     if (options.exportIrradiance) {
-        ensureParentDirectory(*options.exportIrradiance);
         exportVertexIrradiance(world, *options.exportIrradiance);
         logInfo("wrote ", *options.exportIrradiance);
     }
     if (options.exportAvatars) {
-        ensureParentDirectory(*options.exportAvatars);
         exportAvatarSh(world, *options.exportAvatars);
         logInfo("wrote ", *options.exportAvatars);
     }
     if (options.profile) {
-        ensureParentDirectory(*options.profile);
         profiler.writeChromeTrace(*options.profile + ".json");
         profiler.writeCsv(*options.profile + ".csv");
         logInfo("wrote ", *options.profile, ".json and .csv");

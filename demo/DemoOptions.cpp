@@ -5,7 +5,9 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <cstdlib>
 #include <iostream>
+#include <string>
 
 namespace qgi::demo {
 
@@ -17,6 +19,37 @@ std::string builtinList() {
     return list;
 }
 
+/// For integer options: digits, or a whole number written any way strtod reads ("1e6" for a
+/// million). Anything else is "not a whole number" rather than CLI11's "not in range".
+CLI::Validator wholeNumber() {
+    return CLI::Validator(
+        [](std::string& value) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(value.c_str(), &end);
+            if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v) ||
+                v != std::floor(v))
+                return "'" + value + "' is not a whole number";
+            // Exactly representable: rewrite for the integer conversion; larger ones stay as
+            // written and fail the range check.
+            if (std::abs(v) < 9e15) value = std::to_string(static_cast<long long>(v));
+            return {};
+        },
+        "");
+}
+
+/// For real options: a finite number (CLI11's range check lets NaN through).
+CLI::Validator finiteNumber() {
+    return CLI::Validator(
+        [](std::string& value) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(value.c_str(), &end);
+            if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v))
+                return "'" + value + "' is not a finite number";
+            return {};
+        },
+        "");
+}
+
 } // namespace
 
 ParseResult parseDemoOptions(int argc, char** argv) {
@@ -25,16 +58,23 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     CLI::App app{"qgi-demo: walkthrough of a quasi-static scene lit by the qgi runtime.\n"
                  "Interactive: WASD + right mouse drag to fly, Q/E down/up, Shift faster,\n"
                  "Tab selects the next mobile, arrow keys and PageUp/PageDown move it,\n"
-                 "C toggles the scripted camera path, F12 takes a screenshot, Esc quits.",
+                 "C hands the camera back to the scripted path, P toggles the point-set view,\n"
+                 "F12 takes a screenshot, Esc quits.",
                  "qgi-demo"};
     app.option_defaults()->always_capture_default();
     app.add_option("--scene", o.scene, "Built-in scene (" + builtinList() + ") or a .gltf/.glb file");
     app.add_flag("--headless", o.headless,
                  "Render offscreen (hidden window), follow the scripted camera path with a fixed time step");
-    app.add_option("--frames", o.frames, "Frames to run; 0 runs until the window closes (headless: 240)")
+    app.add_option("--frames", o.frames,
+                   "Frames to run; 0 runs until the window closes (headless: 240)")
+        ->transform(wholeNumber())
         ->check(CLI::Range(0, 10'000'000));
-    app.add_option("--width", o.width, "Framebuffer width in pixels")->check(CLI::Range(16, 8192));
-    app.add_option("--height", o.height, "Framebuffer height in pixels")->check(CLI::Range(16, 8192));
+    app.add_option("--width", o.width, "Framebuffer width in pixels")
+        ->transform(wholeNumber())
+        ->check(CLI::Range(16, 8192));
+    app.add_option("--height", o.height, "Framebuffer height in pixels")
+        ->transform(wholeNumber())
+        ->check(CLI::Range(16, 8192));
     app.add_option("--camera-path", o.cameraPath,
                    "'scene' (the scene's own path), 'none' (stay at the start), or a CSV file with "
                    "rows time,x,y,z,yaw_deg,pitch_deg");
@@ -43,6 +83,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         ->check(CLI::IsMember({"photon", "hybrid"}));
     app.add_option("--photons", o.photons,
                    "Photon paths in the stored ray set (0: no global illumination)")
+        ->transform(wholeNumber())
         ->check(CLI::Range(0u, 100'000'000u));
     app.add_option("--estimator", o.estimator,
                    "Per-vertex irradiance estimator: detp (density estimation on the tangent "
@@ -51,18 +92,27 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--disc-radius", o.discRadius,
                    "DETP disc radius in metres (0: the scene default, half its mesh edge bound, "
                    "widened where photons are scarce for the scene's area)")
+        ->transform(finiteNumber())
         ->check(CLI::Range(0.f, 100.f));
     app.add_flag("--full-recompute", o.fullRecompute,
                  "Re-shoot every photon and re-estimate every vertex each frame (the baseline "
                  "the incremental update is measured against)");
     app.add_option("--exposure", o.exposure,
                    "Multiplier on HDR radiance before the tonemap (0: the scene's suggestion)")
+        ->transform(finiteNumber())
         ->check(CLI::Range(0.f, 1e6f));
     app.add_option("--max-edge", o.maxEdgeLength,
                    "Mesh refinement bound in metres (0: the scene's default)")
+        ->transform(finiteNumber())
         ->check(CLI::Range(0.f, 1000.f));
-    app.add_option("--dt", o.dt, "Seconds per frame in headless runs")->check(CLI::Range(1e-4, 1.0));
-    app.add_option("--seed", o.seed, "Seed for every random choice");
+    app.add_option("--dt", o.dt, "Seconds per frame in headless runs")
+        ->transform(finiteNumber())
+        ->check(CLI::Range(1e-4, 1.0));
+    app.add_option("--seed", o.seed, "Seed for every random choice")
+        ->transform(wholeNumber())
+        ->check([](const std::string& value) {
+            return value.starts_with('-') ? "a seed cannot be negative" : std::string{};
+        });
     app.add_option("--screenshot", o.screenshot,
                    "Base path: writes BASE.exr (linear HDR) and BASE.png (tonemapped) after the last frame");
     app.add_option("--profile", o.profile,
@@ -77,10 +127,16 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
                    "the static scene has 1 to 256 glossy or mirror faces)")
         ->check(CLI::IsMember({"on", "off", "auto"}));
-    app.add_option("--vlf-level", o.vlfLevel, "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
+    app.add_option("--vlf-level", o.vlfLevel,
+                   "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
+        ->transform(wholeNumber())
         ->check(CLI::Range(1, 6));
     app.add_option("--vlf-lines", o.vlfLines, "VLF lines per subfield side (a multiple of 8)")
-        ->check(CLI::Range(8, 1024));
+        ->transform(wholeNumber())
+        ->check(CLI::Range(8, 1024))
+        ->check([](const std::string& value) {
+            return std::stoi(value) % 8 == 0 ? std::string{} : value + " is not a multiple of 8";
+        });
     app.add_option("--vlf-cache", o.vlfCache,
                    "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)");
     app.add_option("--export-avatars", o.exportAvatars,

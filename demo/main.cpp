@@ -7,6 +7,7 @@
 
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 
 int main(int argc, char** argv) {
     const auto parsed = qgi::demo::parseDemoOptions(argc, argv);
@@ -14,6 +15,9 @@ int main(int argc, char** argv) {
     try {
         return qgi::demo::runDemo(parsed.options);
     } catch (const qgi::Error& e) {
+        std::fprintf(stderr, "qgi-demo: error: %s\n", e.what());
+        return 1;
+    } catch (const std::filesystem::filesystem_error& e) { // the user's disk, not our bug
         std::fprintf(stderr, "qgi-demo: error: %s\n", e.what());
         return 1;
     } catch (const std::exception& e) {

@@ -33,7 +33,8 @@ GlWindow::GlWindow(const WindowSettings& settings) {
         fail("window size ", settings.width, "x", settings.height, " is not positive");
     if (gLiveWindows == 0 && !glfwInit())
         fail("cannot start GLFW: ", glfwErrorText(),
-             " (without a display, run under 'xvfb-run -a')");
+             " (without a display, run headless under Xvfb: 'xvfb-run -a qgi-demo --headless ...',"
+             " or use scripts/demo, which does that)");
     ++gLiveWindows;
 
     glfwDefaultWindowHints();

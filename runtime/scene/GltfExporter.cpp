@@ -7,7 +7,7 @@
 //    TEXCOORD_0 when present, UNSIGNED_INT indices) with its own material; all data lives in one
 //    buffer, embedded as base64 in a .gltf or as the BIN chunk of a .glb.
 //  - node extras say {"mobility": "static" | "mobile"} or {"avatar": true} on every mesh node,
-//    so no tag depends on inheritance.
+//    so no tag depends on inheritance, and {"pointCache": true} on PointCacheShaded ones.
 //  - emission above 1 is split into emissiveFactor (max component 1) and
 //    KHR_materials_emissive_strength; lights go to KHR_lights_punctual (one per node); the
 //    active camera is written as cameras[0], which the importer makes active.
@@ -19,11 +19,12 @@
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
-#include "components/LightStandIn.h"
+#include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/Transform.h"
@@ -123,7 +124,9 @@ tinygltf::Value mobilityExtras(const Registry& registry, Entity e) {
     using Object = tinygltf::Value::Object;
     if (registry.has<Avatar>(e)) return tinygltf::Value(Object{{"avatar", tinygltf::Value(true)}});
     const char* mobility = registry.has<MobileMesh>(e) ? "mobile" : "static";
-    return tinygltf::Value(Object{{"mobility", tinygltf::Value(std::string(mobility))}});
+    Object extras{{"mobility", tinygltf::Value(std::string(mobility))}};
+    if (registry.has<PointCacheShaded>(e)) extras["pointCache"] = tinygltf::Value(true);
+    return tinygltf::Value(std::move(extras));
 }
 
 tinygltf::Light toGltf(const char* type, const glm::vec3& color, float intensity) {

@@ -1,6 +1,5 @@
 #include "runtime/scene/GltfImporter.h"
 
-#include "runtime/core/Finite.h"
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
@@ -9,10 +8,12 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Finite.h"
 #include "runtime/core/Log.h"
 #include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
@@ -119,6 +120,7 @@ struct EntityRecord {
     std::optional<Camera> camera;
     Light light;
     bool lightStandIn = false; ///< node extras {"standIn": true}: see LightStandIn
+    bool pointCacheShaded = false; ///< node extras {"pointCache": true}: see PointCacheShaded
     Mobility mobility = Mobility::Static;
     const RawPrimitive* source = nullptr; ///< the primitive this entity draws, if any
     bool primitiveOnly = false; ///< exists only to hold one primitive of a multi-primitive mesh
@@ -366,6 +368,7 @@ private:
     Transform localTransform(int index) const;
     std::optional<Mobility> nodeMobility(int index) const;
     bool nodeStandIn(int index) const;
+    bool nodePointCache(int index) const;
     int nodeLight(int index) const;
     /// One record per node below `roots` (and per primitive of multi-primitive meshes).
     std::vector<EntityRecord> traverse(const std::vector<int>& roots);
@@ -969,6 +972,16 @@ bool GltfReader::nodeStandIn(int index) const {
     return standIn.Get<bool>();
 }
 
+bool GltfReader::nodePointCache(int index) const {
+    const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
+    if (!extras.IsObject() || !extras.Has("pointCache")) return false;
+    const std::string field = str("nodes[", index, "].extras.pointCache");
+    const tinygltf::Value& value = extras.Get("pointCache");
+    if (!value.IsBool()) fail(field, "must be true or false");
+    if (mModel.nodes[std::size_t(index)].mesh == -1) fail(field, "set on a node without a mesh");
+    return value.Get<bool>();
+}
+
 std::optional<Mobility> GltfReader::nodeMobility(int index) const {
     const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
     if (!extras.IsObject()) return std::nullopt;
@@ -1040,6 +1053,9 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
             }
             if (const int light = nodeLight(index); light >= 0) record.light = readLight(light);
             record.lightStandIn = nodeStandIn(index);
+            record.pointCacheShaded = nodePointCache(index);
+            if (record.pointCacheShaded && record.mobility != Mobility::Static)
+                fail(field + ".extras.pointCache", "the point cache shades static meshes only");
             records.push_back(std::move(record));
         }
         if (node.mesh != -1) {
@@ -1059,6 +1075,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                     primitive.parent = self;
                     primitive.world = records[std::size_t(self)].world;
                     primitive.mobility = records[std::size_t(self)].mobility;
+                    primitive.pointCacheShaded = records[std::size_t(self)].pointCacheShaded;
                     primitive.source = &(*raw)[p];
                     primitive.primitiveOnly = true;
                     records.push_back(std::move(primitive));
@@ -1185,6 +1202,7 @@ void populate(Registry& registry, ImportedScene& scene) {
             switch (r.mobility) {
             case Mobility::Static:
                 registry.emplace<StaticMesh>(e);
+                if (r.pointCacheShaded) registry.emplace<PointCacheShaded>(e);
                 break;
             case Mobility::Mobile:
                 registry.emplace<MobileMesh>(e);

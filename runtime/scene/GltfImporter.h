@@ -22,7 +22,10 @@
  *    (first in traversal order on ties). Orthographic cameras are skipped with a warning.
  *  - Node extras: {"mobility": "static" | "mobile"} and {"avatar": true}, inherited from the
  *    nearest ancestor that says either; default static. Mesh entities get StaticMesh, MobileMesh
- *    or Avatar (radius: half the diagonal of the mesh's world bounds).
+ *    or Avatar (radius: half the diagonal of the mesh's world bounds). {"pointCache": true} on a
+ *    static mesh node (not inherited) adds PointCacheShaded; {"standIn": true} on a light node
+ *    adds LightStandIn. Animations are not read: a moving object in a file stays where it is
+ *    (tag it mobile and move its Transform from code, or use the demo's mobile keys).
  *  - Resources: SceneInfo (name = file stem, source = path) and TextureLibrary (every image of
  *    the file, decoded to 8-bit RGBA, in file order).
  *

@@ -310,14 +310,17 @@ void RenderSystem::requestScreenshot(const std::filesystem::path& base) {
     mScreenshot = base;
 }
 
-void RenderSystem::writeScreenshot(const std::filesystem::path& base) const {
+void RenderSystem::writeScreenshot(const std::filesystem::path& base) {
     std::filesystem::path exr = base, png = base;
     exr += ".exr";
     png += ".png";
+    mLastScreenshot = ScreenshotOutcome{base, {}};
     try {
         writeExr(exr, readHdr());
         writePng(png, readLdr());
+        logInfo("wrote ", exr.string(), " and ", png.string());
     } catch (const Error& e) {
+        mLastScreenshot->error = e.what();
         logError("screenshot not written: ", e.what());
     }
 }

@@ -10,6 +10,7 @@
 
 #include <filesystem>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace qgi {
@@ -45,6 +46,12 @@ public:
     /// `base`.png (the tonemapped image). Throws qgi::Error now if base's folder does not
     /// exist; a write that still fails is logged (the frame does not throw).
     void requestScreenshot(const std::filesystem::path& base);
+    /// What became of the last screenshot taken: written, or why not (empty until one is).
+    struct ScreenshotOutcome {
+        std::filesystem::path base;
+        std::string error; ///< empty: both files were written
+    };
+    const std::optional<ScreenshotOutcome>& lastScreenshot() const { return mLastScreenshot; }
 
     void setExposure(float exposure) { mRenderer.setExposure(exposure); }
     /// Debug view: draw the point cache's points as dots over the surfaces.
@@ -62,7 +69,7 @@ private:
     bool findCamera(const Registry& registry, RenderCamera& camera) const;
     void sortFrontToBack(const glm::vec3& eye);
     GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
-    void writeScreenshot(const std::filesystem::path& base) const;
+    void writeScreenshot(const std::filesystem::path& base);
     /// The VlfField resource in the renderer's layout (rebuilt when the field is replaced).
     const VlfGpuTables* vlfTables(const Registry& registry);
     bool syncPointCache(const Registry& registry);
@@ -72,6 +79,7 @@ private:
     std::vector<RenderLight> mLights;
     std::vector<Entity> mStale;
     std::optional<std::filesystem::path> mScreenshot;
+    std::optional<ScreenshotOutcome> mLastScreenshot;
     // The point cache's GPU copy (shaders/common/pointcache.glsl).
     GlBuffer mCachePoints, mCacheCellStart, mCacheCellPoints;
     PointCacheView mPointCacheView;

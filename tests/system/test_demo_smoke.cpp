@@ -108,11 +108,43 @@ TEST(DemoSmoke, HelpExitsZeroAndListsTheOptions) {
 }
 
 TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
-    for (const char* args : {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag"}) {
+    for (const char* args :
+         {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag", "--photons abc",
+          "--width 1280.5", "--seed -1", "--dt nan", "--exposure inf", "--vlf-lines 12"}) {
         const RunResult run = runDemo(std::string(args) + " --headless");
         EXPECT_EQ(run.exitCode, 2) << args << ": " << run.output;
         EXPECT_NE(run.output.find("error"), std::string::npos) << args;
     }
+}
+
+TEST(DemoSmoke, WholeNumbersMayBeWrittenInScientificForm) {
+    // "--photons 1e6" is a million; the run then stops at --help.
+    EXPECT_EQ(runDemo("--photons 1e6 --frames 1e1 --help").exitCode, 0);
+}
+
+TEST(DemoSmoke, OutputThatCannotBeWrittenFailsBeforeTheRun) {
+    // A file where a folder should be: the folder cannot be created.
+    const fs::path blocker = scratchDir() / "blocker";
+    std::ofstream(blocker) << "x";
+    const std::string inside = (blocker / "out" / "shot").string();
+    for (const char* option : {"--screenshot ", "--profile ", "--export-irradiance "}) {
+        const RunResult run = runDemo("--scene cornell --headless --frames 1 --photons 1000 " +
+                                      std::string(option) + inside);
+        EXPECT_EQ(run.exitCode, 1) << option << run.output;
+        EXPECT_NE(run.output.find("cannot create the folder"), std::string::npos) << run.output;
+        EXPECT_EQ(run.output.find("ready in"), std::string::npos) << "the scene was loaded first";
+    }
+}
+
+TEST(DemoSmoke, SceneWithoutCameraGetsADefaultOne) {
+    const fs::path triangle = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good" / "triangle.gltf";
+    const std::string base = (scratchDir() / "triangle").string();
+    const RunResult run = runDemo("--headless --frames 2 --width 64 --height 48 --photons 1000 "
+                                  "--vlf off --scene " +
+                                  triangle.string() + " --screenshot " + base);
+    ASSERT_EQ(run.exitCode, 0) << run.output;
+    EXPECT_NE(run.output.find("no camera"), std::string::npos) << run.output;
+    EXPECT_EQ(readPng(base + ".png").width, 64);
 }
 
 TEST(DemoSmoke, MissingSceneFileIsNamedInTheError) {

@@ -54,6 +54,8 @@ const BadCase kCases[] = {
     {"uri_absolute.gltf", "buffers[0].uri", "absolute"},
     {"bad_base64.gltf", "buffers[0].uri", "invalid base64"},
     {"unknown_mobility.gltf", "nodes[0].extras.mobility", "'flying'"},
+    {"point_cache_not_bool.gltf", "nodes[0].extras.pointCache", "true or false"},
+    {"point_cache_on_mobile.gltf", "nodes[0].extras.pointCache", "static meshes only"},
     {"sheared_matrix.gltf", "nodes[0].matrix", "shear"},
     {"unsupported_required_extension.gltf", "extensionsRequired[0]", "not supported"},
     {"corrupt_image.gltf", "images[0]", "image"},

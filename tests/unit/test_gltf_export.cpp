@@ -9,11 +9,12 @@
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
-#include "components/LightStandIn.h"
+#include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -71,6 +72,7 @@ void buildScene(Registry& r) {
     r.emplace<Mesh>(room, box({4, 3, 5}));
     r.emplace<Material>(room, Material{{0.2f, 0.4f, 0.6f}, {5.f, 2.5f, 0.f}, 0.3f, 0.7f, 0});
     r.emplace<StaticMesh>(room);
+    r.emplace<PointCacheShaded>(room);
 
     Transform doorPose;
     doorPose.translation = {0.5f, 0, 0};
@@ -195,6 +197,7 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
         EXPECT_EQ(imported.has<StaticMesh>(after), original.has<StaticMesh>(before));
         EXPECT_EQ(imported.has<MobileMesh>(after), original.has<MobileMesh>(before));
         EXPECT_EQ(imported.has<Avatar>(after), original.has<Avatar>(before));
+        EXPECT_EQ(imported.has<PointCacheShaded>(after), original.has<PointCacheShaded>(before));
     }
 
     // Lights and cameras.
