@@ -1,10 +1,12 @@
 #include "runtime/render/ShaderLoader.h"
 
+#include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
 
 #include <algorithm>
 #include <cctype>
 #include <charconv>
+#include <cstdlib>
 #include <deque>
 #include <fstream>
 #include <iterator>
@@ -187,7 +189,32 @@ GlShader compileStage(const fs::path& root, const std::string& file, std::string
 } // namespace
 
 fs::path shaderDirectory() {
-    return QGI_SHADER_DIR;
+    static const fs::path found = [] {
+        // A folder holds qgi's shaders when it has this file.
+        const auto holdsShaders = [](const fs::path& dir) {
+            std::error_code error;
+            return fs::is_regular_file(dir / "common" / "lighting.glsl", error);
+        };
+        std::vector<fs::path> tried;
+        if (const char* env = std::getenv("QGI_SHADER_DIR"); env && *env) {
+            if (holdsShaders(env)) return fs::path(env);
+            fail("QGI_SHADER_DIR='", env, "' holds no qgi shaders (common/lighting.glsl)");
+        }
+        std::error_code error;
+        const fs::path executable = fs::read_symlink("/proc/self/exe", error);
+        if (!error) {
+            tried.push_back(executable.parent_path() / "shaders");
+            tried.push_back(executable.parent_path().parent_path() / "share" / "qgi" / "shaders");
+        }
+        tried.emplace_back(QGI_SHADER_DIR);
+        for (const fs::path& dir : tried)
+            if (holdsShaders(dir)) return dir;
+        std::string list;
+        for (const fs::path& dir : tried)
+            list += (list.empty() ? "" : ", ") + dir.string();
+        fail("cannot find qgi's shaders (tried ", list, "; set QGI_SHADER_DIR)");
+    }();
+    return found;
 }
 
 GlProgram loadProgram(std::initializer_list<std::string_view> files, std::string_view defines,

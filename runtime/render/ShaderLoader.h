@@ -8,7 +8,10 @@
 
 namespace qgi {
 
-/// The project's GLSL folder (the QGI_SHADER_DIR compile definition).
+/// qgi's GLSL folder, looked up once: the QGI_SHADER_DIR environment variable when set;
+/// else `shaders/` next to the executable, then `../share/qgi/shaders` from it (the layout
+/// `cmake --install` makes); else the source tree the program was built from. Throws
+/// qgi::Error listing the places tried when none holds the shaders.
 std::filesystem::path shaderDirectory();
 
 /** Compiles and links a program from GLSL 4.50 files, one per stage; the stage follows from the
