@@ -164,7 +164,13 @@ std::vector<double> beamErrors(Registry& registry, DetpIrradianceSystem& system,
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     const glm::vec3 power(1.f / float(photons));
     for (std::size_t i = 0; i < photons; ++i) {
-        const Segment seg{{unit(rng), 1.f, unit(rng)}, {0.f, -1.f, 0.f}, 1.f, power, floor, 0, 0};
+        const float x = unit(rng), z = unit(rng);
+        // The triangle it lands on (gridMesh: quad (i, j) spans z in [i, i + 1] / 10 and x in
+        // [j, j + 1] / 10; its first triangle holds the part where the z fraction is larger).
+        const int qi = std::min(int(z * 10.f), 9), qj = std::min(int(x * 10.f), 9);
+        const bool second = x * 10.f - float(qj) > z * 10.f - float(qi);
+        const std::uint32_t triangle = std::uint32_t(2 * (qi * 10 + qj) + (second ? 1 : 0));
+        const Segment seg{{x, 1.f, z}, {0.f, -1.f, 0.f}, 1.f, power, floor, triangle, 0};
         appendPath(store, std::span(&seg, 1));
     }
     system.update(registry, {});
@@ -190,15 +196,18 @@ TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
 
     // Each disc's count is binomial(N, p), p = pi r^2 / A: relative error sqrt((1 - p) / (N p)).
     // The RMS of M such errors has a relative standard deviation of about 1 / sqrt(2M); the
-    // ratio of two independent RMS values about 1 / sqrt(M). Both are checked at 4 sigma.
+    // ratio of two independent RMS values about 1 / sqrt(M). Both are checked at 4 sigma. Every
+    // photon count and seed draws its own stream, so the sets are independent (not prefixes of
+    // one another).
     constexpr int kSeeds = 4;
     const double p = kPi * kRadius * kRadius;
     std::vector<double> rms;
+    std::uint64_t stream = 100;
     for (const std::size_t photons : {20'000u, 80'000u, 320'000u}) {
         double sum2 = 0.0;
         std::size_t m = 0;
         for (int seed = 0; seed < kSeeds; ++seed)
-            for (const double e : beamErrors(registry, system, floor, photons, 100 + seed)) {
+            for (const double e : beamErrors(registry, system, floor, photons, stream++)) {
                 sum2 += e * e;
                 ++m;
             }
@@ -210,6 +219,36 @@ TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
     const double samples = 81.0 * kSeeds;
     for (std::size_t i = 0; i + 1 < rms.size(); ++i)
         EXPECT_NEAR(rms[i] / rms[i + 1], 2.0, 2.0 * 4.0 / std::sqrt(samples)) << "step " << i;
+}
+
+TEST(Detp, ImpactCountUnderAUniformBeamHasItsBinomialError) {
+    // Impact count at an interior vertex: the power landing on its six triangles (0.03 m^2 of
+    // the 1 m^2 beam) over their area, so its count is binomial(N, 0.03) and its relative error
+    // has standard deviation sigma = sqrt((1 - p) / (N p)): each vertex within 4 sigma. Their
+    // mean: a vertex shares a third of its area with each of its 6 neighbours, so it covaries
+    // with them by about sigma^2 / 3 and the mean of the 81 has variance about
+    // 81 (1 + 6 / 3) sigma^2 / 81^2; within 4 of its standard deviations, which a 2 % scale
+    // error exceeds.
+    Registry registry;
+    addDetpResources(registry);
+    const Entity floor =
+        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
+                        kIdentity, false, "floor");
+    DetpSettings settings;
+    settings.estimator = IrradianceEstimator::ImpactCount;
+    settings.discRadius = 0.04f; // unused by impact count; spares a SceneInfo
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    constexpr std::size_t kPhotons = 400'000;
+    const double p = 0.03;
+    const double sigma = std::sqrt((1.0 - p) / (double(kPhotons) * p));
+    const std::vector<double> errors = beamErrors(registry, system, floor, kPhotons, 7);
+    double mean = 0.0;
+    for (std::size_t i = 0; i < errors.size(); ++i) {
+        EXPECT_LT(std::abs(errors[i]), 4.0 * sigma) << "vertex " << i;
+        mean += errors[i] / double(errors.size());
+    }
+    EXPECT_LT(std::abs(mean), 4.0 * sigma * std::sqrt(3.0 / 81.0));
 }
 
 // ---- counting rules -----------------------------------------------------------------------
@@ -539,30 +578,54 @@ TEST(Detp, IncrementalEqualsFullAfter100RandomUpdates) {
 }
 
 TEST(Detp, DriftPolicySchedulesAFullReestimate) {
-    IncrementalWorld world;
-    std::mt19937 rng(4);
-    std::uniform_real_distribution<float> unit(0.f, 1.f);
-    PhotonStore& store = world.registry.ctx().get<PhotonStore>();
-    for (int i = 0; i < 2000; ++i)
-        appendPath(store,
-                   randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+    // One path lands on the floor's centre vertex, re-traced every frame from another height:
+    // each frame subtracts its old segment and adds its new one, two additions to that vertex
+    // (its neighbours lie 5 cm away, beyond the 3 cm discs). With a limit of 50 the 25th
+    // incremental frame reaches it, so the 26th after a full one is full.
+    Registry registry;
+    addDetpResources(registry);
+    const Entity floor =
+        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
+                        kIdentity, false, "floor");
+    const glm::vec3 centre(0.5f, 0.f, 0.5f);
+    const auto landing = [&](float height) {
+        return Segment{centre + glm::vec3(0.f, height, 0.f),
+                       {0.f, -1.f, 0.f},
+                       height,
+                       glm::vec3(1.f),
+                       floor,
+                       0,
+                       0};
+    };
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    appendPath(store, std::vector<Segment>{landing(1.f)});
     DetpSettings settings;
-    settings.discRadius = IncrementalWorld::kRadius;
+    settings.discRadius = 0.03f;
     settings.maxIncrementalUpdates = 50;
     DetpIrradianceSystem system(settings);
-    system.build(world.registry);
-    system.update(world.registry, {});
-    // Incremental frames until some vertex has taken 50 additions; the frame after is full.
-    int frames = 0;
-    bool sawFull = false;
-    while (!sawFull && frames < 1000) {
-        randomDelta(rng, world, 40);
-        system.update(world.registry, {});
-        sawFull = system.lastFrame().full;
-        ++frames;
+    system.build(registry);
+    system.update(registry, {});
+    ASSERT_TRUE(system.lastFrame().full);
+
+    std::vector<int> fullFrames;
+    for (int frame = 1; frame <= 60; ++frame) {
+        PhotonDelta& delta = registry.ctx().get<PhotonDelta>();
+        delta = PhotonDelta{};
+        delta.paths = {0};
+        push(delta.oldSegments, landing(store.segments.length[0]));
+        const Segment next = landing(frame % 2 ? 2.f : 1.f);
+        push(delta.newSegments, next);
+        delta.oldFirst = {0, 1};
+        delta.newFirst = {0, 1};
+        store.segments.clear();
+        push(store.segments, next);
+        system.update(registry, {});
+        if (system.lastFrame().full)
+            fullFrames.push_back(frame);
+        else
+            EXPECT_EQ(system.lastFrame().crossings, 2u) << "frame " << frame;
     }
-    EXPECT_TRUE(sawFull);
-    EXPECT_GT(frames, 2); // 40 paths a frame cannot put 50 additions on one vertex at once
+    EXPECT_EQ(fullFrames, (std::vector<int>{26, 52}));
 }
 
 TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {

@@ -8,6 +8,7 @@
 #include "systems/animation/AnimationSystem.h"
 #include "systems/transform/TransformSystem.h"
 
+#include <glm/gtc/quaternion.hpp>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -124,6 +125,80 @@ TEST(Transform, ChildFollowsItsParent) {
     EXPECT_NEAR(p.x, -1.f, 1e-6f);
     EXPECT_NEAR(p.y, 0.f, 1e-6f);
     EXPECT_TRUE(r.wasChanged<WorldTransform>(child));
+}
+
+TEST(Animation, LoopingPathWrapsAndOffsetShiftsIt) {
+    // Keys at 1, 2 and 3 s: x goes 0 -> 2 -> 4. A loop spans [1, 3), 2 s.
+    PathFollower path{
+        {{1.f, glm::vec3(0.f)}, {2.f, glm::vec3(2.f, 0.f, 0.f)}, {3.f, glm::vec3(4.f, 0.f, 0.f)}},
+        true};
+    const auto xAt = [&](double t) {
+        Transform pose;
+        samplePath(path, t, pose);
+        return pose.translation.x;
+    };
+    EXPECT_FLOAT_EQ(xAt(1.5), 1.f);
+    EXPECT_FLOAT_EQ(xAt(2.5), 3.f);
+    EXPECT_FLOAT_EQ(xAt(3.5), 1.f);   // 3.5 wraps to 1.5
+    EXPECT_FLOAT_EQ(xAt(8.25), 2.5f); // 8.25 = 1 + 3 loops + 1.25
+    EXPECT_FLOAT_EQ(xAt(0.5), 3.f);   // before the first key: 0.5 wraps back to 2.5
+    path.timeOffset = 0.5f;
+    EXPECT_FLOAT_EQ(xAt(1.5), 2.f); // samples 2.0
+    EXPECT_FLOAT_EQ(xAt(3.0), 1.f); // samples 3.5, which wraps to 1.5
+    // Without the loop the ends hold.
+    path.loop = false;
+    path.timeOffset = 0.f;
+    EXPECT_FLOAT_EQ(xAt(0.f), 0.f);
+    EXPECT_FLOAT_EQ(xAt(9.f), 4.f);
+}
+
+TEST(Animation, RotationIsSlerpedAtConstantAngularSpeed) {
+    // Identity to 120 degrees about y over 1 s: at 0.25 s, 30 degrees about y (a linear blend
+    // of the quaternions would give about 26 degrees).
+    const glm::vec3 y(0.f, 1.f, 0.f);
+    const PathFollower path{{{0.f, glm::vec3(0.f), glm::quat(1.f, 0.f, 0.f, 0.f)},
+                             {1.f, glm::vec3(0.f), glm::angleAxis(glm::radians(120.f), y)}},
+                            false};
+    Transform pose;
+    samplePath(path, 0.25, pose);
+    EXPECT_NEAR(glm::degrees(glm::angle(pose.rotation)), 30.f, 1e-3f);
+    EXPECT_NEAR(glm::dot(glm::axis(pose.rotation), y), 1.f, 1e-5f);
+    EXPECT_NEAR(glm::length(pose.rotation), 1.f, 1e-6f);
+}
+
+TEST(Transform, ParentScaleAndMissingParentsAndCycles) {
+    Registry r;
+    // The parent's scale stretches the child's offset.
+    const Entity parent = r.create();
+    Transform parentPose;
+    parentPose.scale = glm::vec3(2.f, 3.f, 4.f);
+    r.emplace<Transform>(parent, parentPose);
+    const Entity child = r.create();
+    Transform childPose;
+    childPose.translation = glm::vec3(1.f, 1.f, 1.f);
+    childPose.parent = parent;
+    r.emplace<Transform>(child, childPose);
+    // A parent without a Transform (or one destroyed) leaves the child at its own pose.
+    const Entity bare = r.create();
+    const Entity orphan = r.create();
+    Transform orphanPose;
+    orphanPose.translation = glm::vec3(5.f, 0.f, 0.f);
+    orphanPose.parent = bare;
+    r.emplace<Transform>(orphan, orphanPose);
+    // A cycle (which the importer refuses) must not hang the frame.
+    const Entity a = r.create(), b = r.create();
+    Transform cyclic;
+    cyclic.parent = b;
+    r.emplace<Transform>(a, cyclic);
+    cyclic.parent = a;
+    r.emplace<Transform>(b, cyclic);
+
+    TransformSystem system;
+    system.update(r, FrameContext{});
+    EXPECT_EQ(glm::vec3(r.get<WorldTransform>(child).matrix[3]), glm::vec3(2.f, 3.f, 4.f));
+    EXPECT_EQ(glm::vec3(r.get<WorldTransform>(orphan).matrix[3]), glm::vec3(5.f, 0.f, 0.f));
+    EXPECT_TRUE(r.has<WorldTransform>(a));
+    EXPECT_EQ(r.get<WorldTransform>(a).matrix, glm::mat4(1.f)); // identity locals stay identity
 }
 
 TEST(Profiler, TimesEveryScheduleEntry) {
