@@ -8,6 +8,7 @@
 #include "components/LightStandIn.h"
 #include "components/Avatar.h"
 #include "components/DirectionalLight.h"
+#include "components/SpotLight.h"
 #include "components/ShLighting.h"
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
@@ -786,12 +787,44 @@ TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
 }
 
 TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
-    MobileRoom room(0);
-    room.world.view<PointLight>().each([](PointLight& light) { light.intensity = 20.f; });
-    room.world.view<const PointLight>().each(
-        [&](Entity e, const PointLight&) { room.world.markChanged<PointLight>(e); });
-    room.system.update(room.world, FrameContext{1});
-    EXPECT_EQ(room.system.staleCount(), room.world.ctx().get<ProbeVolume>().probeCount());
+    // With a budget of 0 nothing is refreshed, so staleCount() is what the frame marked.
+    enum class Trigger { None, FullDelta, LightIntensity, LightMoved, SpotAdded, SunAdded, Albedo };
+    for (const Trigger trigger : {Trigger::None, Trigger::FullDelta, Trigger::LightIntensity,
+                                  Trigger::LightMoved, Trigger::SpotAdded, Trigger::SunAdded,
+                                  Trigger::Albedo}) {
+        SCOPED_TRACE(int(trigger));
+        MobileRoom room(0);
+        Registry& w = room.world;
+        const Entity light = w.view<const PointLight>().entities().front();
+        switch (trigger) {
+        case Trigger::None:
+            break;
+        case Trigger::FullDelta:
+            w.ctx().emplaceOrReplace<PhotonDelta>().full = true;
+            break;
+        case Trigger::LightIntensity:
+            w.patch<PointLight>(light).intensity = 20.f;
+            break;
+        case Trigger::LightMoved:
+            w.patch<WorldTransform>(light).matrix = translation({0.5f, 1.8f, 0.f});
+            break;
+        case Trigger::SpotAdded:
+            w.emplace<SpotLight>(w.create(), SpotLight{});
+            break;
+        case Trigger::SunAdded:
+            w.emplace<DirectionalLight>(w.create(), DirectionalLight{});
+            break;
+        case Trigger::Albedo:
+            w.patch<Material>(room.cube).baseColor = glm::vec3(0.9f);
+            break;
+        }
+        room.system.update(w, FrameContext{1});
+        const std::uint32_t probes = w.ctx().get<ProbeVolume>().probeCount();
+        if (trigger == Trigger::None)
+            EXPECT_EQ(room.system.staleCount(), 0u);
+        else
+            EXPECT_EQ(room.system.staleCount(), probes);
+    }
 }
 
 // ---- export ----------------------------------------------------------------------------------
