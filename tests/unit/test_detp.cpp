@@ -434,7 +434,8 @@ void randomDelta(std::mt19937& rng, IncrementalWorld& world, std::size_t paths) 
                      0,
                      store.segments.bounce[path.first + from]};
         const float oldLength = store.segments.length[path.first + from];
-        head.length = (std::isinf(oldLength) ? 2.f : oldLength) * (0.2f + 0.7f * unit(rng));
+        // Mostly shorter (the mobile moved into its way), sometimes longer (out of its way).
+        head.length = (std::isinf(oldLength) ? 2.f : oldLength) * (0.2f + 1.1f * unit(rng));
         segments.push_back(head);
         for (const Segment& seg : randomPath(rng, world, head.origin + head.length * head.direction,
                                              std::uint8_t(head.bounce + 1)))
@@ -544,7 +545,7 @@ TEST(Detp, IncrementalEqualsFullAfter100RandomUpdates) {
     }
     EXPECT_GT(untouchedChecked, 10'000u);
     EXPECT_GT(touchedChanged, 1'000u);
-    EXPECT_GT(plateIncremental, 100u); // the still plate took incremental updates too
+    EXPECT_GT(plateIncremental, 50u); // the still plate took incremental updates too
 
     // A fresh system over the final ray set.
     Registry& fresh = registry;
