@@ -11,6 +11,7 @@
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "runtime/core/Log.h"
+#include "runtime/io/CacheFile.h"
 #include "runtime/io/IrradianceExport.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GlWindow.h"
@@ -18,7 +19,9 @@
 #include "runtime/scene/SceneLoader.h"
 #include "runtime/scene/SceneQueries.h"
 #include "systems/frame/FrameSchedule.h"
+#include "systems/point_cache/PointCacheFile.h"
 #include "systems/sh_probes/AvatarShExport.h"
+#include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfScene.h"
 
 #define GLFW_INCLUDE_NONE
@@ -125,6 +128,12 @@ int runDemo(const DemoOptions& options) {
     prepareOutput(options.exportScene, "--export-scene");
     prepareOutput(options.exportIrradiance, "--export-irradiance");
     prepareOutput(options.exportAvatars, "--export-avatars");
+    // Cache files are rewritten when stale: never over somebody's file.
+    if (!options.pointCacheFile.empty())
+        checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
+                         "point cache file (--point-cache-file)");
+    if (options.vlfCache != "auto" && options.vlfCache != "none")
+        checkCacheTarget(options.vlfCache, vlf::VlfCache::kMagic, "VLF cache file (--vlf-cache)");
 
     // The window comes first: without a GL 4.5 context there is nothing to show, and the user
     // should learn that before a long scene load.
@@ -169,10 +178,16 @@ int runDemo(const DemoOptions& options) {
         vlf.bake.directionLevel = options.vlfLevel;
         vlf.bake.linesPerSide = options.vlfLines;
         vlf.bake.seed = options.seed;
-        if (options.vlfCache == "auto")
+        if (options.vlfCache == "auto") {
             vlf.cacheFile = world.ctx().get<SceneInfo>().name + ".vlf";
-        else if (options.vlfCache != "none")
+            if (!mayReplaceWithCache(vlf.cacheFile, vlf::VlfCache::kMagic)) {
+                logWarning("--vlf-cache auto: ", vlf.cacheFile.string(),
+                           " exists and is not a VLF cache; baking without a cache file");
+                vlf.cacheFile.clear();
+            }
+        } else if (options.vlfCache != "none") {
             vlf.cacheFile = options.vlfCache;
+        }
         frameSettings.vlf = vlf;
     }
     frameSettings.probes->hybrid = options.mode == "hybrid";

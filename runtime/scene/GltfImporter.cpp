@@ -1113,8 +1113,11 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
     for (std::size_t i = 0; i < materials.size(); ++i)
         materials[i] = readMaterial(int(i));
 
-    // Instances under the same scale share one processed mesh.
+    // Instances under the same scale share one processed mesh. Every instance is a copy in the
+    // scene, so the triangle limit counts instances: a small file of many instances must not
+    // refine into more than memory holds.
     std::map<std::pair<const RawPrimitive*, float>, Mesh> processed;
+    double triangles = 0.0;
     for (EntityRecord& r : scene.records) {
         if (!r.source) continue;
         const glm::mat3 linear(r.world);
@@ -1123,13 +1126,21 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         const float bound = maxEdge > 0.f && scale > 0.f ? maxEdge / scale : 0.f;
         auto [it, inserted] = processed.try_emplace({r.source, bound});
         if (inserted) {
+            MeshProcessingOptions options;
+            options.maxEdgeLength = bound;
+            options.maxTriangles = std::max(kSceneMaxTriangles - triangles, 0.0);
             try {
-                it->second =
-                    processMesh(r.source->mesh, MeshProcessingOptions{.maxEdgeLength = bound});
+                it->second = processMesh(r.source->mesh, options);
             } catch (const Error& e) {
-                fail(r.source->field, e.what());
+                fail(r.source->field, e.what(),
+                     triangles > 0.0 ? str(" (", triangles, " triangles in the scene before it)")
+                                     : std::string());
             }
         }
+        triangles += double(it->second.indices.size() / 3);
+        if (triangles > kSceneMaxTriangles)
+            fail(r.source->field, "the scene holds more than ", kSceneMaxTriangles,
+                 " triangles after refinement (instances counted); raise the edge bound");
         if (it->second.indices.empty()) {
             logWarning(mLabel, ": ", r.source->field, ": no triangles with area; skipped");
             continue;

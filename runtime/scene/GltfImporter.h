@@ -51,6 +51,9 @@ namespace qgi {
 
 /// Deepest JSON nesting the importer hands to tinygltf.
 inline constexpr int kGltfMaxJsonDepth = 64;
+/// Most triangles a scene may hold after refinement, every instance counted (about 1.5 GB of
+/// mesh data; the atrium has 0.3M).
+inline constexpr double kSceneMaxTriangles = 2e7;
 /// Largest .gltf, .glb, external buffer or image file the importer reads, bytes.
 inline constexpr std::uintmax_t kGltfMaxFileBytes = std::uintmax_t(1) << 30;
 /// Deepest node hierarchy accepted: the transform system walks at most 256 ancestors, and mesh

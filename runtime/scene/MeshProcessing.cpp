@@ -24,9 +24,6 @@ namespace {
 using OmMesh = OpenMesh::TriMesh_ArrayKernelT<>;
 using Triangle = std::array<std::uint32_t, 3>;
 
-// An edge bound that refines past this many triangles is a mistake, not a scene: refuse it
-// rather than exhaust memory (20M triangles are about 1.5 GB of mesh data).
-constexpr double kMaxRefinedTriangles = 2e7;
 // Texture coordinates closer than this are the same (no seam between the two vertices).
 constexpr float kUvWeldTolerance = 1e-6f;
 // A triangle whose height is below this fraction of its longest edge is collinear within
@@ -353,10 +350,10 @@ Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options) {
     const WeldedVertices welded = weldVertices(raw, options.weldDistance);
     double refinedEstimate = 0.0;
     const std::vector<Triangle> triangles = cleanTriangles(raw, welded, options, refinedEstimate);
-    if (refinedEstimate > kMaxRefinedTriangles)
+    if (refinedEstimate > options.maxTriangles)
         fail("mesh processing: maxEdgeLength ", options.maxEdgeLength, " m would refine ",
              triangles.size(), " triangles into about ", refinedEstimate,
-             ", more than the limit of ", kMaxRefinedTriangles);
+             ", more than the limit of ", options.maxTriangles);
     std::vector<glm::vec2> uvs;
     OmMesh mesh = buildHalfedgeMesh(welded, triangles, uvs);
     if (options.maxEdgeLength > 0.f) refine(mesh, uvs, options.maxEdgeLength);

@@ -14,6 +14,9 @@ struct MeshProcessingOptions {
     float maxEdgeLength = 0.f;
     /// Triangles with area below this (m^2), or with a degenerate (collinear) shape, are removed.
     float minTriangleArea = 1e-12f;
+    /// Refuse (qgi::Error) an edge bound that would refine past this many triangles: a mistake,
+    /// not a scene (20M triangles are about 1.5 GB of mesh data).
+    double maxTriangles = 2e7;
 };
 
 /// Cleans and refines a raw triangle mesh for per-vertex lighting (OpenMesh): welds duplicate

@@ -1,5 +1,7 @@
 #include "systems/point_cache/PointCacheFile.h"
 
+#include "runtime/io/CacheFile.h"
+
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
@@ -25,7 +27,8 @@
 namespace qgi {
 namespace {
 
-constexpr char kMagic[8] = {'Q', 'G', 'I', 'P', 'C', 'A', 'C', 'H'};
+constexpr const char* kMagic = kPointCacheMagic.data();
+constexpr std::size_t kMagicSize = kPointCacheMagic.size();
 constexpr std::uint32_t kEndian = 0x01020304u;
 
 void put(std::vector<char>& out, const void* data, std::size_t size) {
@@ -107,8 +110,9 @@ std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& 
 }
 
 void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& c) {
+    checkCacheTarget(path, kPointCacheMagic, "point cache file");
     std::vector<char> out;
-    put(out, kMagic, sizeof kMagic);
+    put(out, kMagic, kMagicSize);
     putValue(out, kPointCacheFileVersion);
     putValue(out, kEndian);
     putValue(out, key);
@@ -146,9 +150,9 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     if (!file) fail("point cache file '", path, "' cannot be opened");
     std::vector<char> data((std::istreambuf_iterator<char>(file)),
                            std::istreambuf_iterator<char>());
-    if (data.size() < sizeof kMagic + 36 + sizeof(std::uint64_t))
+    if (data.size() < kMagicSize + 36 + sizeof(std::uint64_t))
         fail("point cache file '", path, "' is truncated (", data.size(), " bytes)");
-    if (std::memcmp(data.data(), kMagic, sizeof kMagic) != 0)
+    if (std::memcmp(data.data(), kMagic, kMagicSize) != 0)
         fail("point cache file '", path, "' is not a point cache file (bad magic)");
     const std::size_t body = data.size() - sizeof(std::uint64_t);
     Reader in(data, body, path);

@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 namespace qgi {
 
@@ -26,6 +27,9 @@ std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& 
  * before it. Written to "<path>.tmp" and renamed, so a crash never leaves half a file under `path`.
  *  Throws qgi::Error when the file cannot be written.                                     */
 void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& cache);
+
+/// The first bytes of every point cache file.
+inline constexpr std::string_view kPointCacheMagic{"QGIPCACH", 8};
 
 /** Reads a file written by writePointCacheFile into `cache` (point set, ao, direct,
  *  visibility; the settings and grid are the caller's). Throws qgi::Error with the reason, and

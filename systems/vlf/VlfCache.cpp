@@ -1,5 +1,7 @@
 #include "systems/vlf/VlfCache.h"
 
+#include "runtime/io/CacheFile.h"
+
 #include "runtime/core/Error.h"
 #include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
@@ -11,8 +13,6 @@
 
 namespace qgi::vlf {
 namespace {
-
-constexpr char kMagic[8] = {'Q', 'G', 'I', 'V', 'L', 'F', '\r', '\n'};
 
 class Writer {
 public:
@@ -97,11 +97,12 @@ void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
 
     Fnv1aHasher h;
     h.addBytes(w.bytes.data(), w.bytes.size());
+    checkCacheTarget(path, kMagic, "VLF cache file");
     const std::filesystem::path tmp = path.string() + ".tmp";
     {
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
         if (!out) fail(path.string(), ": cannot write the VLF cache");
-        out.write(kMagic, sizeof(kMagic));
+        out.write(kMagic.data(), std::streamsize(kMagic.size()));
         const std::uint32_t version = kVersion;
         const std::uint64_t key = v.mKey, size = w.bytes.size(), hash = h.value();
         out.write(reinterpret_cast<const char*>(&version), sizeof(version));
@@ -124,7 +125,7 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
     std::uint32_t version = 0;
     std::uint64_t key = 0, size = 0, hash = 0;
     in.read(magic, sizeof(magic));
-    if (!in || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
+    if (!in || std::string_view(magic, sizeof(magic)) != kMagic)
         fail(name, ": not a VLF cache file (bad magic)");
     in.read(reinterpret_cast<char*>(&version), sizeof(version));
     in.read(reinterpret_cast<char*>(&key), sizeof(key));
@@ -136,7 +137,7 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
     if (key != expectedKey)
         fail(name, ": VLF cache is stale (it was baked for another scene or other settings)");
     const std::uintmax_t fileSize = std::filesystem::file_size(path);
-    const std::uintmax_t header = sizeof(kMagic) + sizeof(version) + 3 * sizeof(std::uint64_t);
+    const std::uintmax_t header = kMagic.size() + sizeof(version) + 3 * sizeof(std::uint64_t);
     if (fileSize != header + size) fail(name, ": VLF cache is corrupt (file size does not match)");
     std::vector<char> bytes(size);
     in.read(bytes.data(), std::streamsize(size));

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 
 namespace qgi::vlf {
 
@@ -21,9 +22,11 @@ class VlfCache {
 public:
     /// 2: texel coverage is exact (clipped triangle area), no longer 4 x 4 samples.
     static constexpr std::uint32_t kVersion = 2;
+    /// The first bytes of every VLF cache file.
+    static constexpr std::string_view kMagic{"QGIVLF\r\n", 8};
 
     /// Writes atomically (a temporary file renamed over the target). Throws qgi::Error when
-    /// the file cannot be written.
+    /// the file cannot be written, or when something other than a VLF cache is at `path`.
     static void save(const Vlf& vlf, const std::filesystem::path& path);
     /// Reads a file written by save() for `expectedKey`. Throws qgi::Error as described.
     static Vlf load(const std::filesystem::path& path, std::uint64_t expectedKey);

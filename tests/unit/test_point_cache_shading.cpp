@@ -25,6 +25,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 namespace qgi {
 namespace {
@@ -232,6 +233,22 @@ TEST(PointCacheFile, AnUnwritableFileStillGivesTheBuiltCache) {
     EXPECT_FALSE(system.loadedFromFile());
     EXPECT_GT(scene.registry.ctx().get<PointCache>().size(), 20u);
     std::filesystem::remove(blocker);
+}
+
+TEST(PointCacheFile, SomebodysFileAtThePathIsNeverOverwritten) {
+    // Not a cache: the build works without a file and leaves it as it was.
+    const std::filesystem::path notes = scratch("notes.txt");
+    { std::ofstream(notes) << "my notes"; }
+    ShadowScene scene;
+    PointCacheSystem system(smallSettings(notes.string()));
+    EXPECT_NO_THROW(system.build(scene.registry));
+    EXPECT_FALSE(system.loadedFromFile());
+    std::ifstream in(notes);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(text, "my notes");
+    EXPECT_THROW(writePointCacheFile(notes.string(), 1, scene.registry.ctx().get<PointCache>()),
+                 Error);
+    std::filesystem::remove(notes);
 }
 
 TEST(PointCacheFile, RoundTripsAndIsLoadedOnTheNextStart) {

@@ -189,6 +189,23 @@ TEST(VlfCache, AnUnwritableCacheFileStillGivesTheBakedField) {
     std::filesystem::remove(blocker);
 }
 
+TEST(VlfCache, SomebodysFileAtThePathIsNeverOverwritten) {
+    const auto scene = glossyRoom();
+    const VlfSettings s = small();
+    const auto notes = tempFile("notes.vlf");
+    writeAll(notes, {'m', 'y', ' ', 'n', 'o', 't', 'e', 's'});
+    bool baked = false;
+    const Vlf field = VlfCache::loadOrBake(*scene, s, notes, &baked);
+    EXPECT_TRUE(baked);
+    EXPECT_EQ(readAll(notes), (std::vector<char>{'m', 'y', ' ', 'n', 'o', 't', 'e', 's'}));
+    EXPECT_THROW(VlfCache::save(field, notes), Error);
+    // An empty file, or an older cache, may be replaced.
+    writeAll(notes, {});
+    EXPECT_NO_THROW(VlfCache::save(field, notes));
+    EXPECT_NO_THROW(VlfCache::save(field, notes));
+    std::filesystem::remove(notes);
+}
+
 // ---- VlfSystem: the registry's static meshes in, the VlfField resource out ------------------
 
 namespace {
