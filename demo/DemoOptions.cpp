@@ -1,5 +1,6 @@
 #include "demo/DemoOptions.h"
 
+#include "runtime/core/Log.h"
 #include "runtime/scene/BuiltinScenes.h"
 
 #include <CLI/CLI.hpp>
@@ -159,7 +160,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         result.exitCode = app.exit(e);
         return result;
     } catch (const CLI::ParseError& e) {
-        std::cerr << "qgi-demo: error: " << e.what() << " (see --help)\n";
+        std::cerr << "qgi-demo: error: " << printable(e.what()) << " (see --help)\n";
         result.exitCode = 2;
         return result;
     }

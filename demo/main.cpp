@@ -4,6 +4,7 @@
 #include "demo/DemoOptions.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 
 #include <cstdio>
 #include <exception>
@@ -15,13 +16,13 @@ int main(int argc, char** argv) {
     try {
         return qgi::demo::runDemo(parsed.options);
     } catch (const qgi::Error& e) {
-        std::fprintf(stderr, "qgi-demo: error: %s\n", e.what());
+        std::fprintf(stderr, "qgi-demo: error: %s\n", qgi::printable(e.what()).c_str());
         return 1;
     } catch (const std::filesystem::filesystem_error& e) { // the user's disk, not our bug
-        std::fprintf(stderr, "qgi-demo: error: %s\n", e.what());
+        std::fprintf(stderr, "qgi-demo: error: %s\n", qgi::printable(e.what()).c_str());
         return 1;
     } catch (const std::exception& e) {
-        std::fprintf(stderr, "qgi-demo: internal error: %s\n", e.what());
+        std::fprintf(stderr, "qgi-demo: internal error: %s\n", qgi::printable(e.what()).c_str());
         return 3;
     }
 }

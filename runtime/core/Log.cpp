@@ -26,10 +26,28 @@ const char* prefix(LogLevel level) {
 void setLogLevel(LogLevel level) { gLevel.store(level); }
 LogLevel logLevel() { return gLevel.load(std::memory_order_relaxed); }
 
+std::string printable(std::string_view text) {
+    std::string out;
+    out.reserve(text.size());
+    for (const char ch : text) {
+        const auto byte = static_cast<unsigned char>(ch);
+        if (byte < 0x20 || byte == 0x7f) {
+            static constexpr char kHex[] = "0123456789abcdef";
+            out += "\\x";
+            out += kHex[byte >> 4];
+            out += kHex[byte & 15];
+        } else {
+            out += ch;
+        }
+    }
+    return out;
+}
+
 void logMessage(LogLevel level, const std::string& message) {
     if (level < logLevel()) return;
+    const std::string line = printable(message);
     std::lock_guard lock(gWriteMutex);
-    std::fprintf(stderr, "%s%s\n", prefix(level), message.c_str());
+    std::fprintf(stderr, "%s%s\n", prefix(level), line.c_str());
     std::fflush(stderr);
 }
 

@@ -3,6 +3,9 @@
 
 #include "runtime/core/Error.h"
 
+#include <string>
+#include <string_view>
+
 namespace qgi {
 
 enum class LogLevel { Debug, Info, Warning, Error, Quiet };
@@ -10,6 +13,11 @@ enum class LogLevel { Debug, Info, Warning, Error, Quiet };
 void setLogLevel(LogLevel level);
 LogLevel logLevel();
 void logMessage(LogLevel level, const std::string& message);
+
+/// `text` safe to print on a terminal: control characters (escape sequences in a hostile
+/// file's names, a stray carriage return) become \xNN, so a message cannot move the cursor,
+/// retitle the window or forge another line. logMessage applies it to every message.
+std::string printable(std::string_view text);
 
 template <typename... Args> void logDebug(Args&&... args) {
     if (logLevel() <= LogLevel::Debug) logMessage(LogLevel::Debug, str(std::forward<Args>(args)...));

@@ -337,6 +337,9 @@ private:
     /// Parses the JSON (syntax errors end here, with line and column), then checks the URIs
     /// of every buffer and image.
     void checkUris(std::string_view json) const;
+    /// The JSON types of the fields qgi reads (tinygltf quietly puts a default in place of a
+    /// value of the wrong type: a string intensity, a float index, a negative offset).
+    void checkTypes(const nlohmann::json& document) const;
     void checkUri(const nlohmann::json& object, const std::string& section, std::size_t index,
                   bool isBuffer) const;
     /// The file a relative URI names inside the scene's folder; throws for anything else.
@@ -429,6 +432,7 @@ void GltfReader::checkUris(std::string_view json) const {
         fail("JSON", oneLine(std::move(what)));
     }
     if (!document.is_object()) fail("JSON", "the top level is not an object");
+    checkTypes(document);
     for (const auto& [section, isBuffer] :
          {std::pair{"buffers", true}, std::pair{"images", false}}) {
         const auto it = document.find(section);
@@ -436,6 +440,185 @@ void GltfReader::checkUris(std::string_view json) const {
         for (std::size_t i = 0; i < it->size(); ++i)
             checkUri((*it)[i], section, i, isBuffer);
     }
+}
+
+void GltfReader::checkTypes(const nlohmann::json& document) const {
+    using Json = nlohmann::json;
+    enum class Kind { Index, Number, String, Bool, Object };
+    // An index, count, offset or size: a whole number >= 0 that fits tinygltf's int.
+    const auto check = [&](const Json& value, const std::string& field, Kind kind) {
+        switch (kind) {
+        case Kind::Index:
+            if (!value.is_number_unsigned() ||
+                value.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<int>::max()))
+                fail(field, value.dump(), " is not a whole number from 0 to 2^31 - 1");
+            return;
+        case Kind::Number:
+            if (!value.is_number() || !std::isfinite(value.get<double>()))
+                fail(field, value.dump(), " is not a finite number");
+            return;
+        case Kind::String:
+            if (!value.is_string()) fail(field, value.dump(), " is not a string");
+            return;
+        case Kind::Bool:
+            if (!value.is_boolean()) fail(field, value.dump(), " is not true or false");
+            return;
+        case Kind::Object:
+            if (!value.is_object()) fail(field, "is not an object");
+            return;
+        }
+    };
+    const auto join = [](const std::string& path, const char* name) {
+        return path.empty() ? std::string(name) : path + "." + name;
+    };
+    // Optional members of `object` (itself at `path`), each of one kind.
+    const auto members = [&](const Json& object, const std::string& path,
+                             std::initializer_list<std::pair<const char*, Kind>> list) {
+        for (const auto& [name, kind] : list)
+            if (const auto it = object.find(name); it != object.end())
+                check(*it, join(path, name), kind);
+    };
+    const auto array = [&](const Json& object, const std::string& path, const char* name, Kind kind,
+                           std::size_t size = 0) {
+        const auto it = object.find(name);
+        if (it == object.end()) return;
+        const std::string field = join(path, name);
+        if (!it->is_array()) fail(field, "is not an array");
+        if (size != 0 && it->size() != size) fail(field, it->size(), " values; needs ", size);
+        for (std::size_t i = 0; i < it->size(); ++i)
+            check((*it)[i], str(field, "[", i, "]"), kind);
+    };
+    // Each element of a top-level array (or of `object`'s member) that must be an object.
+    const auto each = [&](const Json& object, const std::string& path, const char* name,
+                          const auto& fn) {
+        const auto it = object.find(name);
+        if (it == object.end()) return;
+        const std::string field = join(path, name);
+        if (!it->is_array()) fail(field, "is not an array");
+        for (std::size_t i = 0; i < it->size(); ++i) {
+            const std::string element = str(field, "[", i, "]");
+            check((*it)[i], element, Kind::Object);
+            fn((*it)[i], element);
+        }
+    };
+    const auto child = [&](const Json& object, const std::string& path, const char* name,
+                           const auto& fn) {
+        if (const auto it = object.find(name); it != object.end()) {
+            check(*it, join(path, name), Kind::Object);
+            fn(*it, join(path, name));
+        }
+    };
+
+    if (const auto it = document.find("asset"); it != document.end()) {
+        check(*it, "asset", Kind::Object);
+        members(*it, "asset", {{"version", Kind::String}, {"minVersion", Kind::String}});
+        if (const auto min = it->find("minVersion");
+            min != it->end() && min->get_ref<const std::string&>() != "2.0")
+            fail("asset.minVersion", "'", min->get<std::string>(), "': this reader is glTF 2.0");
+    }
+    members(document, "", {{"scene", Kind::Index}});
+    each(document, "", "scenes",
+         [&](const Json& o, const std::string& at) { array(o, at, "nodes", Kind::Index); });
+    each(document, "", "nodes", [&](const Json& o, const std::string& at) {
+        members(o, at,
+                {{"camera", Kind::Index},
+                 {"mesh", Kind::Index},
+                 {"skin", Kind::Index},
+                 {"name", Kind::String}});
+        array(o, at, "children", Kind::Index);
+        array(o, at, "translation", Kind::Number, 3);
+        array(o, at, "rotation", Kind::Number, 4);
+        array(o, at, "scale", Kind::Number, 3);
+        array(o, at, "matrix", Kind::Number, 16);
+        child(o, at, "extensions", [&](const Json& e, const std::string& ext) {
+            child(e, ext, kLightsExtension.data(), [&](const Json& l, const std::string& light) {
+                members(l, light, {{"light", Kind::Index}});
+            });
+        });
+    });
+    each(document, "", "meshes", [&](const Json& o, const std::string& at) {
+        each(o, at, "primitives", [&](const Json& p, const std::string& primitive) {
+            members(p, primitive,
+                    {{"indices", Kind::Index}, {"material", Kind::Index}, {"mode", Kind::Index}});
+            child(p, primitive, "attributes", [&](const Json& a, const std::string& attributes) {
+                for (const auto& [name, value] : a.items())
+                    check(value, attributes + "." + name, Kind::Index);
+            });
+        });
+    });
+    each(document, "", "accessors", [&](const Json& o, const std::string& at) {
+        members(o, at,
+                {{"bufferView", Kind::Index},
+                 {"byteOffset", Kind::Index},
+                 {"componentType", Kind::Index},
+                 {"count", Kind::Index},
+                 {"type", Kind::String},
+                 {"normalized", Kind::Bool}});
+        array(o, at, "min", Kind::Number);
+        array(o, at, "max", Kind::Number);
+    });
+    each(document, "", "bufferViews", [&](const Json& o, const std::string& at) {
+        members(o, at,
+                {{"buffer", Kind::Index},
+                 {"byteOffset", Kind::Index},
+                 {"byteLength", Kind::Index},
+                 {"byteStride", Kind::Index},
+                 {"target", Kind::Index}});
+    });
+    each(document, "", "buffers", [&](const Json& o, const std::string& at) {
+        members(o, at, {{"byteLength", Kind::Index}, {"uri", Kind::String}});
+    });
+    each(document, "", "images", [&](const Json& o, const std::string& at) {
+        members(o, at,
+                {{"uri", Kind::String}, {"bufferView", Kind::Index}, {"mimeType", Kind::String}});
+    });
+    each(document, "", "textures", [&](const Json& o, const std::string& at) {
+        members(o, at, {{"source", Kind::Index}, {"sampler", Kind::Index}});
+    });
+    each(document, "", "materials", [&](const Json& o, const std::string& at) {
+        members(o, at,
+                {{"alphaCutoff", Kind::Number},
+                 {"doubleSided", Kind::Bool},
+                 {"alphaMode", Kind::String}});
+        array(o, at, "emissiveFactor", Kind::Number, 3);
+        child(o, at, "pbrMetallicRoughness", [&](const Json& p, const std::string& pbr) {
+            array(p, pbr, "baseColorFactor", Kind::Number, 4);
+            members(p, pbr, {{"metallicFactor", Kind::Number}, {"roughnessFactor", Kind::Number}});
+            child(p, pbr, "baseColorTexture", [&](const Json& t, const std::string& texture) {
+                members(t, texture, {{"index", Kind::Index}, {"texCoord", Kind::Index}});
+            });
+        });
+        child(o, at, "extensions", [&](const Json& e, const std::string& ext) {
+            child(e, ext, kEmissiveStrengthExtension.data(),
+                  [&](const Json& x, const std::string& strength) {
+                      members(x, strength, {{"emissiveStrength", Kind::Number}});
+                  });
+        });
+    });
+    each(document, "", "cameras", [&](const Json& o, const std::string& at) {
+        members(o, at, {{"type", Kind::String}});
+        child(o, at, "perspective", [&](const Json& p, const std::string& perspective) {
+            members(p, perspective,
+                    {{"yfov", Kind::Number},
+                     {"znear", Kind::Number},
+                     {"zfar", Kind::Number},
+                     {"aspectRatio", Kind::Number}});
+        });
+    });
+    child(document, "", "extensions", [&](const Json& e, const std::string& ext) {
+        child(e, ext, kLightsExtension.data(), [&](const Json& x, const std::string& lights) {
+            each(x, lights, "lights", [&](const Json& l, const std::string& light) {
+                members(
+                    l, light,
+                    {{"type", Kind::String}, {"intensity", Kind::Number}, {"range", Kind::Number}});
+                array(l, light, "color", Kind::Number, 3);
+                child(l, light, "spot", [&](const Json& sp, const std::string& spot) {
+                    members(sp, spot,
+                            {{"innerConeAngle", Kind::Number}, {"outerConeAngle", Kind::Number}});
+                });
+            });
+        });
+    });
 }
 
 void GltfReader::checkUri(const nlohmann::json& object, const std::string& section,
@@ -531,7 +714,9 @@ void GltfReader::loadModel(const std::vector<unsigned char>& bytes, std::string_
         error = e.what();
     }
     if (!mImageFailure.field.empty()) fail(mImageFailure.field, mImageFailure.what);
-    if (!ok) fail("glTF", oneLine(error));
+    // tinygltf reports some malformed values (a string where a number belongs, a colour of the
+    // wrong length) in `error` and still returns success, with a default in their place.
+    if (!ok || !error.empty()) fail("glTF", oneLine(error.empty() ? "load failed" : error));
     if (!warning.empty()) logWarning(mLabel, ": ", oneLine(warning));
 }
 
@@ -767,6 +952,7 @@ Material GltfReader::readMaterial(int index) const {
 
     Material material;
     material.baseColor = color(pbr + ".baseColorFactor", m.pbrMetallicRoughness.baseColorFactor, 4);
+    unit(pbr + ".baseColorFactor[3]", m.pbrMetallicRoughness.baseColorFactor[3]); // alpha
     material.metallic = unit(pbr + ".metallicFactor", m.pbrMetallicRoughness.metallicFactor);
     material.roughness = unit(pbr + ".roughnessFactor", m.pbrMetallicRoughness.roughnessFactor);
     if (!m.emissiveFactor.empty())
@@ -777,8 +963,8 @@ Material GltfReader::readMaterial(int index) const {
             str(field, ".extensions.", kEmissiveStrengthExtension, ".emissiveStrength");
         const tinygltf::Value& strength = it->second.Get("emissiveStrength");
         const double value = strength.IsNumber() ? strength.GetNumberAsDouble() : -1.0;
-        if (!(value >= 0.0 && value <= double(std::numeric_limits<float>::max())))
-            fail(name, "must be a finite number >= 0");
+        if (!(value >= 0.0 && value <= kMaxRadiometricValue))
+            fail(name, value, " is not a number from 0 to ", kMaxRadiometricValue);
         material.emission *= float(value);
     }
     const tinygltf::TextureInfo& texture = m.pbrMetallicRoughness.baseColorTexture;
@@ -806,16 +992,19 @@ std::optional<Camera> GltfReader::readCamera(int index) const {
     if (c.type != "perspective")
         fail(field + ".type", "'", c.type, "' is not perspective or orthographic");
     const tinygltf::PerspectiveCamera& p = c.perspective;
-    if (!(p.yfov > 0.0 && p.yfov < std::numbers::pi))
-        fail(field + ".perspective.yfov", p.yfov, " is not in (0, pi)");
-    if (!(p.znear > 0.0 && p.znear < 1e30))
-        fail(field + ".perspective.znear", p.znear, " is not > 0");
+    // Beyond about 170 degrees a perspective projection is all distortion; below a micrometre
+    // (or a zfar within 0.1% of it) float depth has no precision left.
+    if (!(p.yfov >= 1e-3 && p.yfov <= 3.0))
+        fail(field + ".perspective.yfov", p.yfov, " is not in [0.001, 3] radians");
+    if (!(p.znear >= 1e-6 && p.znear < 1e30))
+        fail(field + ".perspective.znear", p.znear, " is not at least 1e-6 m");
     Camera camera;
     camera.yfov = float(p.yfov);
     camera.znear = float(p.znear);
     if (p.zfar != 0.0) { // 0: absent, an infinite projection; the component's default stands in
-        if (!(p.zfar > p.znear && p.zfar < 1e30))
-            fail(field + ".perspective.zfar", p.zfar, " is not beyond znear ", p.znear);
+        if (!(p.zfar >= 1.001 * p.znear && p.zfar < 1e30))
+            fail(field + ".perspective.zfar", p.zfar, " is not beyond znear ", p.znear,
+                 " by at least 0.1%");
         camera.zfar = float(p.zfar);
     }
     return camera;
@@ -834,8 +1023,9 @@ Light GltfReader::readLight(int index) const {
             color[i] = float(c);
         }
     }
-    if (!(l.intensity >= 0.0 && l.intensity < double(std::numeric_limits<float>::max())))
-        fail(field + ".intensity", l.intensity, " is not a finite number >= 0");
+    if (!(l.intensity >= 0.0 && l.intensity <= kMaxRadiometricValue))
+        fail(field + ".intensity", l.intensity, " is not a number from 0 to ", kMaxRadiometricValue,
+             " (W/sr, or W/m^2 for a directional light)");
     const float intensity = float(l.intensity);
     if (l.type == "point") return PointLight{color, intensity};
     if (l.type == "directional") return DirectionalLight{color, intensity};
@@ -1046,6 +1236,9 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
             if (node.camera != -1) {
                 checkIndex(field + ".camera", node.camera, mModel.cameras.size(), "cameras");
                 record.camera = readCamera(node.camera);
+                for (int c = 0; c < 3; ++c)
+                    if (!(glm::length(glm::vec3(record.world[c])) > 1e-12f))
+                        fail(field, "a camera node whose world scale is zero sees nothing");
                 if (record.camera && node.camera < activeCameraIndex) {
                     activeCameraIndex = node.camera;
                     activeRecord = records.size();

@@ -51,6 +51,10 @@ namespace qgi {
 
 /// Deepest JSON nesting the importer hands to tinygltf.
 inline constexpr int kGltfMaxJsonDepth = 64;
+/// Largest light intensity (W/sr; W/m^2 for directional lights) and emitted radiance
+/// (W/(m^2 sr)) accepted: far above any real light, far below float overflow in the photon
+/// powers and irradiance sums built from them.
+inline constexpr double kMaxRadiometricValue = 1e9;
 /// Most triangles a scene may hold after refinement, every instance counted (about 1.5 GB of
 /// mesh data; the atrium has 0.3M).
 inline constexpr double kSceneMaxTriangles = 2e7;

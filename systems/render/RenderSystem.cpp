@@ -27,6 +27,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include <algorithm>
+#include <cmath>
 
 namespace qgi {
 namespace {
@@ -75,7 +76,8 @@ void RenderSystem::update(Registry& registry, const FrameContext& frame) {
         sortFrontToBack(scene.camera.position);
         scene.items = mItems;
     } else if (!mWarnedNoCamera) {
-        logWarning("no entity has Camera and WorldTransform: the frame stays black");
+        logWarning("no camera with a usable pose (Camera and a WorldTransform of non-zero scale): "
+                   "the frame stays black");
         mWarnedNoCamera = true;
     }
     mRenderer.render(scene, registry.ctx().find<FrameProfiler>(), frame.frameIndex);
@@ -297,7 +299,14 @@ bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) co
     const WorldTransform* chosenWorld = registry.tryGet<WorldTransform>(entity);
     if (!chosen || !chosenWorld) return false;
     const float aspect = float(settings().width) / float(settings().height);
-    camera.view = glm::inverse(chosenWorld->matrix);
+    // A camera sees along its pose; a scale on its node would only distort the view.
+    glm::mat4 pose = chosenWorld->matrix;
+    for (int c = 0; c < 3; ++c) {
+        const float length = glm::length(glm::vec3(pose[c]));
+        if (!(length > 1e-20f) || !std::isfinite(length)) return false;
+        pose[c] /= length;
+    }
+    camera.view = glm::inverse(pose);
     camera.projection = glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar);
     camera.position = glm::vec3(chosenWorld->matrix[3]);
     return true;

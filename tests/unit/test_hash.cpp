@@ -1,6 +1,9 @@
 // The shared FNV-1a hasher (runtime/core/Hash.h) against the published FNV-1a 64 test vectors,
-// and the byte sequences its add/addArray helpers stand for (cache files depend on them).
+// and the byte sequences its add/addArray helpers stand for (cache files depend on them); and
+// the logger's printable(), which keeps hostile names from driving the terminal.
 #include "runtime/core/Hash.h"
+
+#include "runtime/core/Log.h"
 
 #include <gtest/gtest.h>
 
@@ -63,6 +66,20 @@ TEST(Fnv1aHasher, AddArrayHashesTheCountThenTheElements) {
         h.add(std::uint64_t(0));
         return h.value();
     }());
+}
+
+} // namespace
+} // namespace qgi
+
+namespace qgi {
+namespace {
+
+TEST(Log, PrintableEscapesControlCharacters) {
+    // A hostile name that would retitle the terminal, clear it and forge a line.
+    EXPECT_EQ(printable("ok \x1b]0;owned\x07\x1b[2J\rqgi: fake\n"),
+              "ok \\x1b]0;owned\\x07\\x1b[2J\\x0dqgi: fake\\x0a");
+    EXPECT_EQ(printable("caf\xc3\xa9 \x7f"), "caf\xc3\xa9 \\x7f"); // UTF-8 passes, DEL does not
+    EXPECT_EQ(printable(""), "");
 }
 
 } // namespace
