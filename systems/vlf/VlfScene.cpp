@@ -43,8 +43,11 @@ VlfScene::Material VlfScene::fromComponent(const qgi::Material& m) {
     vm.specular = m.specular;
     vm.phongExponent = m.phongExponent;
     const bool explicitSpecular = m.specular != glm::vec3(0.f);
+    // A rough metal (roughness >= kDiffuseRoughness: a lobe of n_s below about 4, glTF's default
+    // roughness 1 among them) scatters nearly as widely as a diffuse surface: it stays diffuse
+    // with albedo baseColor, rather than costing a directional field it would blur anyway.
     if (!explicitSpecular && m.metallic > 0.f && std::isfinite(m.metallic) &&
-        std::isfinite(m.roughness)) {
+        std::isfinite(m.roughness) && m.roughness < kDiffuseRoughness) {
         // glTF metallic-roughness read as diffuse + modified Phong: the metal fraction
         // becomes the lobe (k_s = metallic, grey), the rest stays diffuse; Beckmann
         // alpha = roughness^2 matches Phong n_s = 2 / alpha^2 - 2; roughness 0 is a mirror.

@@ -80,9 +80,13 @@ public:
         glm::vec3 diffuse{0.f}, emission{0.f}, specular{0.f};
         float phongExponent = 0.f;
     };
+    /// Roughness from which a metal counts as diffuse (n_s = 2 / roughness^4 - 2 below 4).
+    static constexpr float kDiffuseRoughness = 0.75f;
     /// The VLF's reading of a Material component: `specular` and `phongExponent` when set;
     /// otherwise glTF metallic-roughness mapped to k_s = metallic, k_d = baseColor *
-    /// (1 - metallic), n_s = 2 / roughness^4 - 2 (Beckmann-Phong match; roughness 0: mirror).
+    /// (1 - metallic), n_s = 2 / roughness^4 - 2 (Beckmann-Phong match; roughness 0: mirror),
+    /// except that a metal of roughness kDiffuseRoughness or more stays diffuse (k_d =
+    /// baseColor, no lobe).
     static Material fromComponent(const qgi::Material& material);
     VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint32_t>& group,
              const std::vector<Material>& materials, std::vector<PunctualLight> lights,

@@ -1,4 +1,5 @@
 // The VLF structure: direction set, triangle lookup, cells, subfield frames, tiling, memory.
+#include "components/Material.h"
 #include "runtime/core/Error.h"
 #include "systems/vlf/DirectionSet.h"
 #include "systems/vlf/Vlf.h"
@@ -327,3 +328,36 @@ TEST(VlfStructure, BadSettingsAreRejected) {
     test::VlfSceneBuilder empty;
     EXPECT_THROW(empty.build(), Error);
 }
+
+namespace qgi::vlf {
+namespace {
+
+TEST(VlfMaterials, MetallicRoughnessBecomesAPhongLobeUnlessItIsRough) {
+    qgi::Material m;
+    m.baseColor = glm::vec3(0.8f, 0.6f, 0.4f);
+    m.metallic = 1.f;
+    // Roughness 0.5: alpha 0.25, n_s = 2 / 0.25^2 - 2 = 30.
+    m.roughness = 0.5f;
+    VlfScene::Material glossy = VlfScene::fromComponent(m);
+    EXPECT_EQ(glossy.specular, glm::vec3(1.f));
+    EXPECT_EQ(glossy.diffuse, glm::vec3(0.f));
+    EXPECT_FLOAT_EQ(glossy.phongExponent, 30.f);
+    // Roughness 0: a mirror. Half metal: half the lobe, the rest diffuse.
+    m.roughness = 0.f;
+    m.metallic = 0.5f;
+    glossy = VlfScene::fromComponent(m);
+    EXPECT_EQ(glossy.phongExponent, 0.f);
+    EXPECT_EQ(glossy.specular, glm::vec3(0.5f));
+    EXPECT_EQ(glossy.diffuse, 0.5f * m.baseColor);
+    // glTF's defaults (metallic 1, roughness 1) and anything from kDiffuseRoughness on: diffuse.
+    for (const float roughness : {VlfScene::kDiffuseRoughness, 1.f}) {
+        m.metallic = 1.f;
+        m.roughness = roughness;
+        const VlfScene::Material rough = VlfScene::fromComponent(m);
+        EXPECT_EQ(rough.specular, glm::vec3(0.f)) << roughness;
+        EXPECT_EQ(rough.diffuse, m.baseColor) << roughness;
+    }
+}
+
+} // namespace
+} // namespace qgi::vlf
