@@ -1321,6 +1321,13 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         if (inserted) {
             MeshProcessingOptions options;
             options.maxEdgeLength = bound;
+            // Meshes are processed in their own units: the welding distance and the area below
+            // which a triangle is dropped are world-space sizes (a room modelled in
+            // micrometres under a scale of 1e6 is a room).
+            if (scale > 0.f) {
+                options.weldDistance /= scale;
+                options.minTriangleArea /= scale * scale;
+            }
             options.maxTriangles = std::max(kSceneMaxTriangles - triangles, 0.0);
             try {
                 it->second = processMesh(r.source->mesh, options);

@@ -244,5 +244,27 @@ TEST(GltfExportErrors, UnknownExtensionAndUnwritablePathThrow) {
                  Error);
 }
 
+TEST(GltfImportUnits, AMeshInMicrometresUnderAScaleOfAMillionIsKept) {
+    // A 4 m floor modelled as 4 um: welding and the degenerate-area test work in world units.
+    Registry original;
+    Transform pose;
+    pose.scale = glm::vec3(1e6f);
+    const Entity floor = addNode(original, "Floor", pose);
+    Mesh raw;
+    raw.positions = {{0, 0, 0}, {4e-6f, 0, 0}, {4e-6f, 0, -4e-6f}, {0, 0, -4e-6f}};
+    raw.indices = {0, 1, 2, 0, 2, 3};
+    original.emplace<Mesh>(floor, raw);
+    original.emplace<Material>(floor);
+    original.emplace<StaticMesh>(floor);
+    const fs::path path = fs::path(::testing::TempDir()) / "micrometres.gltf";
+    exportGltf(original, path);
+    Registry imported;
+    importGltf(imported, path, SceneOptions{.maxEdgeLength = 1000.f});
+    const Mesh& mesh = imported.get<Mesh>(entityNamed(imported, "Floor"));
+    EXPECT_EQ(mesh.indices.size(), 6u);
+    EXPECT_EQ(mesh.positions.size(), 4u);
+    fs::remove(path);
+}
+
 } // namespace
 } // namespace qgi
