@@ -1,10 +1,14 @@
 #include "demo/DemoApp.h"
 
 #include "components/Camera.h"
+#include "components/DirectionalLight.h"
 #include "components/Material.h"
+#include "components/Mesh.h"
 #include "components/Name.h"
 #include "components/PathFollower.h"
 #include "components/PointCacheShaded.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/Transform.h"
 #include "components/WorldTransform.h"
@@ -36,6 +40,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <string>
 
@@ -71,6 +76,27 @@ Entity addDefaultCamera(Registry& registry) {
     return e;
 }
 
+/// A scene with nothing to light is an error; one with nothing that emits, a warning.
+void checkLitScene(const Registry& registry) {
+    const std::string& name = registry.ctx().get<SceneInfo>().name;
+    std::size_t triangles = 0;
+    bool emissive = false;
+    registry.view<const Mesh>().each([&](Entity e, const Mesh& mesh) {
+        triangles += mesh.indices.size() / 3;
+        const Material* m = registry.tryGet<Material>(e);
+        emissive |= m && m->emission != glm::vec3(0.f);
+    });
+    if (triangles == 0)
+        fail("scene '", name, "' has no triangles to light (its meshes are empty or degenerate)");
+    const bool lights = !registry.view<const PointLight>().entities().empty() ||
+                        !registry.view<const SpotLight>().entities().empty() ||
+                        !registry.view<const DirectionalLight>().entities().empty();
+    if (!lights && !emissive && registry.ctx().get<SceneInfo>().environment == glm::vec3(0.f))
+        logWarning("scene '", name,
+                   "' has no lights, no emissive surfaces and a black sky: "
+                   "the image will be black");
+}
+
 void applyCameraPath(Registry& registry, const std::string& choice) {
     Entity camera = findActiveCamera(registry);
     if (!camera) camera = addDefaultCamera(registry);
@@ -86,15 +112,22 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
 /// after it. Throws qgi::Error naming the option.
 void prepareOutput(const std::optional<std::string>& base, const char* option) {
     if (!base) return;
-    const std::filesystem::path folder = std::filesystem::path(*base).has_parent_path()
-                                             ? std::filesystem::path(*base).parent_path()
-                                             : std::filesystem::path(".");
+    namespace fs = std::filesystem;
+    if (base->empty()) fail(option, ": the path is empty");
     std::error_code error;
-    std::filesystem::create_directories(folder, error);
+    if (base->back() == '/' || fs::is_directory(*base, error))
+        fail(option, ": '", *base, "' is a folder; give a file path");
+    const fs::path folder =
+        fs::path(*base).has_parent_path() ? fs::path(*base).parent_path() : fs::path(".");
+    fs::create_directories(folder, error);
     if (error)
         fail(option, ": cannot create the folder '", folder.string(), "': ", error.message());
-    if (!std::filesystem::is_directory(folder) || ::access(folder.c_str(), W_OK) != 0)
-        fail(option, ": the folder '", folder.string(), "' is not writable");
+    // Write permission alone does not tell (root may write anywhere but /proc and /sys): create
+    // a file there and remove it again.
+    const fs::path probe = folder / (".qgi-write-test-" + std::to_string(::getpid()));
+    const bool writable = std::ofstream(probe).good();
+    fs::remove(probe, error);
+    if (!writable) fail(option, ": the folder '", folder.string(), "' is not writable");
 }
 
 /// `--vlf auto`: on when the static scene has glossy or mirror faces, but not more than 256 of
@@ -151,6 +184,7 @@ int runDemo(const DemoOptions& options) {
         FrameProfiler::Scope scope(&profiler, "load.scene");
         loadScene(world, options.scene, SceneOptions{options.maxEdgeLength});
     }
+    checkLitScene(world);
     applyCameraPath(world, options.cameraPath);
     if (options.exportScene) {
         exportGltf(world, *options.exportScene);
@@ -263,19 +297,32 @@ int runDemo(const DemoOptions& options) {
             logInfo("frame ", f + 1, "/", options.frames);
     }
 
-    if (options.exportIrradiance) {
-        exportVertexIrradiance(world, *options.exportIrradiance);
-        logInfo("wrote ", *options.exportIrradiance);
-    }
-    if (options.exportAvatars) {
-        exportAvatarSh(world, *options.exportAvatars);
-        logInfo("wrote ", *options.exportAvatars);
-    }
-    if (options.profile) {
-        profiler.writeChromeTrace(*options.profile + ".json");
-        profiler.writeCsv(*options.profile + ".csv");
-        logInfo("wrote ", *options.profile, ".json and .csv");
-    }
+    // Each output is written even when another fails; the run fails after all were tried.
+    std::string failures;
+    const auto write = [&](const char* option, const auto& fn) {
+        try {
+            fn();
+        } catch (const std::exception& e) {
+            failures += str(failures.empty() ? "" : "; ", option, ": ", e.what());
+        }
+    };
+    if (options.exportIrradiance)
+        write("--export-irradiance", [&] {
+            exportVertexIrradiance(world, *options.exportIrradiance);
+            logInfo("wrote ", *options.exportIrradiance);
+        });
+    if (options.exportAvatars)
+        write("--export-avatars", [&] {
+            exportAvatarSh(world, *options.exportAvatars);
+            logInfo("wrote ", *options.exportAvatars);
+        });
+    if (options.profile)
+        write("--profile", [&] {
+            profiler.writeChromeTrace(*options.profile + ".json");
+            profiler.writeCsv(*options.profile + ".csv");
+            logInfo("wrote ", *options.profile, ".json and .csv");
+        });
+    if (!failures.empty()) fail(failures);
     if (!options.quiet) std::printf("\n%s", profiler.summaryTable().c_str());
     return 0;
 }

@@ -2,9 +2,11 @@
 
 #include "runtime/core/Log.h"
 #include "runtime/scene/BuiltinScenes.h"
+#include "systems/photon_update/PhotonSettings.h"
 
 #include <CLI/CLI.hpp>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
@@ -25,14 +27,22 @@ std::string builtinList() {
 CLI::Validator wholeNumber() {
     return CLI::Validator(
         [](std::string& value) -> std::string {
+            const bool digits =
+                !value.empty() &&
+                value.find_first_not_of("0123456789", value[0] == '-') == std::string::npos &&
+                value != "-";
+            if (digits) { // as written, unless it overflows 64 bits
+                errno = 0;
+                (void)std::strtoull(value.c_str() + (value[0] == '-'), nullptr, 10);
+                return errno == ERANGE ? "'" + value + "' is too large" : std::string{};
+            }
             char* end = nullptr;
             const double v = std::strtod(value.c_str(), &end);
             if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v) ||
                 v != std::floor(v))
                 return "'" + value + "' is not a whole number";
-            // Exactly representable: rewrite for the integer conversion; larger ones stay as
-            // written and fail the range check.
-            if (std::abs(v) < 9e15) value = std::to_string(static_cast<long long>(v));
+            if (!(std::abs(v) < 9e15)) return "'" + value + "' is too large";
+            value = std::to_string(static_cast<long long>(v)); // exact below 2^53
             return {};
         },
         "");
@@ -85,7 +95,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--photons", o.photons,
                    "Photon paths in the stored ray set (0: no global illumination)")
         ->transform(wholeNumber())
-        ->check(CLI::Range(0u, 100'000'000u));
+        ->check(CLI::Range(0u, std::uint32_t(maxPhotonCount(PhotonSettings{}.maxBounces))));
     app.add_option("--estimator", o.estimator,
                    "Per-vertex irradiance estimator: detp (density estimation on the tangent "
                    "plane), impact (impact count) or photonmap (k-nearest photon map)")

@@ -19,10 +19,14 @@ void checkFraction(float value, const char* field, float max) {
 
 } // namespace
 
+std::uint64_t maxPhotonCount(std::uint32_t maxBounces) {
+    return kMaxStoredSegments / (std::uint64_t(maxBounces) + 1);
+}
+
 void validatePhotonSettings(const PhotonSettings& s) {
     if (s.maxBounces > kMaxBounces)
         fail("PhotonSettings.maxBounces = ", s.maxBounces, " is not in [0, ", kMaxBounces, "]");
-    const std::uint64_t maxPhotons = kMaxStoredSegments / (std::uint64_t(s.maxBounces) + 1);
+    const std::uint64_t maxPhotons = maxPhotonCount(s.maxBounces);
     if (s.photonCount == 0 || s.photonCount > maxPhotons)
         fail("PhotonSettings.photonCount = ", s.photonCount, " is not in [1, ", maxPhotons,
              "] (the limit for maxBounces = ", s.maxBounces, ")");

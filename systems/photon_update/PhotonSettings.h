@@ -52,6 +52,9 @@ struct PhotonSettings {
     bool emissiveSurfaces = true;
 };
 
+/// The most photons a store may hold at `maxBounces` (32-bit segment indices with room for
+/// compaction: 2^30 / (maxBounces + 1)).
+std::uint64_t maxPhotonCount(std::uint32_t maxBounces);
 /// Throws qgi::Error naming the field when a setting is out of its range.
 void validatePhotonSettings(const PhotonSettings& settings);
 

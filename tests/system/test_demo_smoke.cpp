@@ -136,6 +136,29 @@ TEST(DemoSmoke, OutputThatCannotBeWrittenFailsBeforeTheRun) {
     }
 }
 
+TEST(DemoSmoke, OutputPathsThatNameNoFileAreRefused) {
+    for (const char* args : {"--screenshot ''", "--profile /tmp/", "--export-irradiance /tmp"}) {
+        const RunResult run = runDemo(std::string("--headless --frames 1 ") + args);
+        EXPECT_EQ(run.exitCode, 1) << args << ": " << run.output;
+        EXPECT_EQ(run.output.find("ready in"), std::string::npos) << args;
+    }
+}
+
+TEST(DemoSmoke, SomebodysFileIsNeverTakenForACache) {
+    const fs::path notes = scratchDir() / "notes.txt";
+    std::ofstream(notes) << "my notes";
+    for (const char* option : {"--point-cache-file ", "--vlf-cache "}) {
+        const RunResult run = runDemo("--scene cornell --headless --frames 1 --photons 1000 " +
+                                      std::string(option) + notes.string());
+        EXPECT_EQ(run.exitCode, 1) << option << run.output;
+        EXPECT_NE(run.output.find("not overwritten"), std::string::npos) << run.output;
+    }
+    std::ifstream in(notes);
+    std::string text;
+    std::getline(in, text);
+    EXPECT_EQ(text, "my notes");
+}
+
 TEST(DemoSmoke, SceneWithoutCameraGetsADefaultOne) {
     const fs::path triangle = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good" / "triangle.gltf";
     const std::string base = (scratchDir() / "triangle").string();
