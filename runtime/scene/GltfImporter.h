@@ -32,9 +32,14 @@
  *  Hostile input: before tinygltf sees a byte, the importer checks the file size, the GLB header,
  *  the JSON's nesting depth (tinygltf recurses and overflows the stack) and every buffer and
  *  image URI (relative, inside the file's folder, present, of the declared size; base64 data
- *  URIs well formed). After parsing it checks what tinygltf does not: every index, every byte
- *  range of buffer views and accessors, component types per attribute, index values, finite
- *  numbers, the node graph (one parent per node, no cycles, bounded depth). Any failure throws
+ *  URIs well formed), and the JSON type of every field it reads (tinygltf would quietly put a
+ *  default in place of a string intensity, a fractional index or a negative offset). After
+ *  parsing it checks what tinygltf does not: every index, every byte range of buffer views and
+ *  accessors, component types per attribute, index values, finite numbers and their ranges
+ *  (colours in [0, 1], lights and emission up to kMaxRadiometricValue, usable cameras), the
+ *  node graph (one parent per node, no cycles, bounded depth), the total triangle count after
+ *  refinement with every instance counted (kSceneMaxTriangles) and the float precision left at
+ *  the scene's distance from the origin. Any failure throws
  *  qgi::Error with one line `<file>: <field path>: <what>`, and the registry is left as it was:
  *  entities are created only after the whole file has been read and checked.
  */
