@@ -381,6 +381,8 @@ private:
     /// Refuses a scene so far from the origin that float positions cannot resolve it, and
     /// warns where they resolve it only coarsely.
     void checkPrecision(const Aabb& bounds) const;
+    /// Refuses a mesh node whose world matrix scales an axis to nearly nothing or beyond reason.
+    void checkMeshScale(const std::string& field, const glm::mat4& world) const;
 
     fs::path mPath;
     fs::path mFolder;
@@ -1235,6 +1237,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                            glm::toMat4(t.rotation) * glm::scale(glm::mat4(1.f), t.scale);
             if (!isFinite(record.world))
                 fail(field, "world transform overflows (translation or scale too large)");
+            if (node.mesh != -1) checkMeshScale(field, record.world);
             record.mobility = nodeMobility(index).value_or(
                 parent >= 0 ? records[std::size_t(parent)].mobility : Mobility::Static);
             if (node.camera != -1) {
@@ -1302,6 +1305,12 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
             fail(r.source->field, "world-space positions overflow");
         rawBounds.extend(box);
     }
+    if (!rawBounds.empty()) {
+        const double size = glm::length(glm::dvec3(rawBounds.extent()));
+        if (!(size <= kSceneMaxSize))
+            fail("", "the scene is ", size, " m across, more than the ", kSceneMaxSize,
+                 " m qgi lights (are its units millimetres?)");
+    }
     float maxEdge = mOptions.maxEdgeLength;
     if (maxEdge == 0.f && !rawBounds.empty()) maxEdge = glm::length(rawBounds.extent()) / 50.f;
     scene.info.maxEdgeLength = maxEdge;
@@ -1356,6 +1365,18 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         if (r.mobility == Mobility::Avatar) r.avatarRadius = 0.5f * glm::length(box.extent());
     }
     checkPrecision(scene.info.bounds);
+}
+
+void GltfReader::checkMeshScale(const std::string& field, const glm::mat4& world) const {
+    // Within these a mesh keeps float precision in its own units and in world units alike;
+    // outside them a flattened or exploded mesh would fail later, deep in a lighting system.
+    constexpr double kMinScale = 1e-8, kMaxScale = 1e8;
+    const glm::dvec3 scale(glm::length(glm::dvec3(world[0])), glm::length(glm::dvec3(world[1])),
+                           glm::length(glm::dvec3(world[2])));
+    for (int a = 0; a < 3; ++a)
+        if (!(scale[a] >= kMinScale && scale[a] <= kMaxScale))
+            fail(field, "world scale (", scale.x, ", ", scale.y, ", ", scale.z,
+                 ") of a mesh node is outside [", kMinScale, ", ", kMaxScale, "]");
 }
 
 void GltfReader::checkPrecision(const Aabb& bounds) const {

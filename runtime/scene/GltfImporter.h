@@ -60,6 +60,9 @@ inline constexpr int kGltfMaxJsonDepth = 64;
 /// (W/(m^2 sr)) accepted: far above any real light, far below float overflow in the photon
 /// powers and irradiance sums built from them.
 inline constexpr double kMaxRadiometricValue = 1e9;
+/// Largest scene accepted, metres across its bounds' diagonal (a thousand kilometres: a file
+/// beyond that has the wrong units, and float normals and areas would overflow).
+inline constexpr double kSceneMaxSize = 1e6;
 /// Most triangles a scene may hold after refinement, every instance counted (about 1.5 GB of
 /// mesh data; the atrium has 0.3M).
 inline constexpr double kSceneMaxTriangles = 2e7;

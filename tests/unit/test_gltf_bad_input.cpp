@@ -66,6 +66,8 @@ const BadCase kCases[] = {
     {"camera_fov_too_wide.gltf", "cameras[0].perspective.yfov", "radians"},
     {"camera_zero_scale.gltf", "nodes[1]", "scale is zero"},
     {"far_from_origin.gltf", "", "from the origin"},
+    {"mesh_node_flat_scale.gltf", "nodes[0]", "world scale (1, 0, 1)"},
+    {"scene_too_large.gltf", "", "units"},
     {"point_cache_on_mobile.gltf", "nodes[0].extras.pointCache", "static meshes only"},
     {"sheared_matrix.gltf", "nodes[0].matrix", "shear"},
     {"unsupported_required_extension.gltf", "extensionsRequired[0]", "not supported"},
