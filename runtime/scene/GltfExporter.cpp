@@ -8,6 +8,8 @@
 //    buffer, embedded as base64 in a .gltf or as the BIN chunk of a .glb.
 //  - node extras say {"mobility": "static" | "mobile"} or {"avatar": true} on every mesh node,
 //    so no tag depends on inheritance, and {"pointCache": true} on PointCacheShaded ones.
+//  - a PathFollower becomes LINEAR translation and rotation channels of one animation, with its
+//    loop and time offset in the node's extras {"path": {...}}.
 //  - emission above 1 is split into emissiveFactor (max component 1) and
 //    KHR_materials_emissive_strength; lights go to KHR_lights_punctual (one per node); the
 //    active camera is written as cameras[0], which the importer makes active.
@@ -24,6 +26,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PathFollower.h"
 #include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
@@ -102,6 +105,50 @@ int addMesh(tinygltf::Model& model, std::vector<unsigned char>& buffer, const Me
     out.primitives.push_back(std::move(primitive));
     model.meshes.push_back(std::move(out));
     return int(model.meshes.size() - 1);
+}
+
+/// A scripted path as glTF animation channels on `node` (LINEAR translation and rotation over
+/// the path's key times), in the file's one animation. What glTF cannot say, the loop and the
+/// time offset, goes to the node's extras as {"path": {"loop": bool, "timeOffset": s}}.
+void addPathAnimation(tinygltf::Model& model, std::vector<unsigned char>& buffer,
+                      const PathFollower& path, int node) {
+    std::vector<float> times;
+    std::vector<glm::vec3> positions;
+    std::vector<glm::vec4> rotations; // x, y, z, w as glTF stores them
+    for (const PathKey& k : path.keys) {
+        times.push_back(k.time);
+        positions.push_back(k.position);
+        rotations.push_back({k.rotation.x, k.rotation.y, k.rotation.z, k.rotation.w});
+    }
+    const int input =
+        addAccessor(model, buffer, times, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR, 0);
+    model.accessors[std::size_t(input)].minValues = {times.front()};
+    model.accessors[std::size_t(input)].maxValues = {times.back()};
+    if (model.animations.empty()) model.animations.emplace_back().name = "qgi paths";
+    tinygltf::Animation& animation = model.animations.front();
+    const auto channel = [&](const char* target, int output) {
+        tinygltf::AnimationSampler sampler;
+        sampler.input = input;
+        sampler.output = output;
+        sampler.interpolation = "LINEAR";
+        animation.samplers.push_back(std::move(sampler));
+        tinygltf::AnimationChannel out;
+        out.sampler = int(animation.samplers.size() - 1);
+        out.target_node = node;
+        out.target_path = target;
+        animation.channels.push_back(std::move(out));
+    };
+    channel("translation", addAccessor(model, buffer, positions, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                       TINYGLTF_TYPE_VEC3, 0));
+    channel("rotation", addAccessor(model, buffer, rotations, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                    TINYGLTF_TYPE_VEC4, 0));
+    tinygltf::Node& n = model.nodes[std::size_t(node)];
+    tinygltf::Value::Object extras =
+        n.extras.IsObject() ? n.extras.Get<tinygltf::Value::Object>() : tinygltf::Value::Object{};
+    extras["path"] = tinygltf::Value(
+        tinygltf::Value::Object{{"loop", tinygltf::Value(path.loop)},
+                                {"timeOffset", tinygltf::Value(double(path.timeOffset))}});
+    n.extras = tinygltf::Value(std::move(extras));
 }
 
 tinygltf::Material toGltf(const Material& m) {
@@ -209,6 +256,9 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
         }
 
         if (const Camera* camera = registry.tryGet<Camera>(e)) cameras.emplace_back(camera, int(i));
+        if (const PathFollower* path = registry.tryGet<PathFollower>(e);
+            path && !path->keys.empty())
+            addPathAnimation(model, buffer, *path, int(i));
     }
 
     std::stable_partition(cameras.begin(), cameras.end(),

@@ -24,8 +24,13 @@
  *    nearest ancestor that says either; default static. Mesh entities get StaticMesh, MobileMesh
  *    or Avatar (radius: half the diagonal of the mesh's world bounds). {"pointCache": true} on a
  *    static mesh node (not inherited) adds PointCacheShaded; {"standIn": true} on a light node
- *    adds LightStandIn. Animations are not read: a moving object in a file stays where it is
- *    (tag it mobile and move its Transform from code, or use the demo's mobile keys).
+ *    adds LightStandIn.
+ *  - Animations: translation and rotation channels become a looping PathFollower on their
+ *    node (keys at every time of either channel; LINEAR blends, STEP holds, CUBICSPLINE keeps
+ *    its values and blends them linearly; all animations of the file play together). Scale
+ *    and morph-weight channels are skipped with a warning (mobiles are rigid), and so is the
+ *    animation of a node that would move a static mesh. Node extras {"path": {"loop": bool,
+ *    "timeOffset": s}} set what glTF cannot say (the exporter writes them).
  *  - Resources: SceneInfo (name = file stem, source = path) and TextureLibrary (every image of
  *    the file, decoded to 8-bit RGBA, in file order).
  *

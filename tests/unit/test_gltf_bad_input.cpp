@@ -68,6 +68,8 @@ const BadCase kCases[] = {
     {"far_from_origin.gltf", "", "from the origin"},
     {"mesh_node_flat_scale.gltf", "nodes[0]", "world scale (1, 0, 1)"},
     {"scene_too_large.gltf", "", "units"},
+    {"animation_times_not_increasing.gltf", "animations[0].samplers[0].input",
+     "strictly increasing"},
     {"point_cache_on_mobile.gltf", "nodes[0].extras.pointCache", "static meshes only"},
     {"sheared_matrix.gltf", "nodes[0].matrix", "shear"},
     {"unsupported_required_extension.gltf", "extensionsRequired[0]", "not supported"},

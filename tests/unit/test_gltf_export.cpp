@@ -14,6 +14,7 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PathFollower.h"
 #include "components/PointCacheShaded.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
@@ -82,6 +83,15 @@ void buildScene(Registry& r) {
     r.emplace<Mesh>(door, quad());
     r.emplace<Material>(door, Material{{0.9f, 0.8f, 0.7f}, {0.5f, 0.25f, 0.f}, 0.f, 1.f, -1});
     r.emplace<MobileMesh>(door);
+    // The door swings on a scripted path (keys in the parent's frame), once, late.
+    PathFollower swing;
+    swing.keys = {{0.f, doorPose.translation, doorPose.rotation},
+                  {1.5f, doorPose.translation + glm::vec3(0, 0.25f, 0),
+                   glm::angleAxis(0.4f, glm::vec3(0, 1, 0))},
+                  {4.f, doorPose.translation, glm::angleAxis(-0.2f, glm::vec3(0, 1, 0))}};
+    swing.loop = false;
+    swing.timeOffset = 0.75f;
+    r.emplace<PathFollower>(door, swing);
 
     Transform heroPose;
     heroPose.translation = {-2, 0, 1};
@@ -199,6 +209,21 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
         EXPECT_EQ(imported.has<Avatar>(after), original.has<Avatar>(before));
         EXPECT_EQ(imported.has<PointCacheShaded>(after), original.has<PointCacheShaded>(before));
     }
+
+    // The scripted path: the same keys, loop and offset.
+    const PathFollower& swing = original.get<PathFollower>(entityNamed(original, "Door"));
+    const PathFollower* swung = imported.tryGet<PathFollower>(entityNamed(imported, "Door"));
+    ASSERT_NE(swung, nullptr);
+    ASSERT_EQ(swung->keys.size(), swing.keys.size());
+    for (std::size_t k = 0; k < swing.keys.size(); ++k) {
+        EXPECT_EQ(swung->keys[k].time, swing.keys[k].time);
+        expectNear(swung->keys[k].position, swing.keys[k].position, kTolerance);
+        EXPECT_NEAR(std::abs(glm::dot(swung->keys[k].rotation, swing.keys[k].rotation)), 1.f,
+                    kTolerance);
+    }
+    EXPECT_EQ(swung->loop, false);
+    EXPECT_EQ(swung->timeOffset, 0.75f);
+    EXPECT_FALSE(imported.has<PathFollower>(entityNamed(imported, "Room")));
 
     // Lights and cameras.
     const PointLight& bulb = imported.get<PointLight>(entityNamed(imported, "Bulb"));

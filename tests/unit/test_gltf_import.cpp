@@ -14,15 +14,18 @@
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PathFollower.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/Transform.h"
 #include "components/WorldTransform.h"
 
+#include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <stb/stb_image_write.h>
 
 #include <cmath>
@@ -337,6 +340,112 @@ TEST(GltfImport, JpegTextureIsDecoded) {
             EXPECT_NEAR(int(images[0].rgba[i + std::size_t(c)]), int(colour[c]), 2) << i;
         EXPECT_EQ(images[0].rgba[i + 3], 255);
     }
+}
+
+/// A .gltf written from JSON plus float arrays: each array becomes a buffer view and an
+/// accessor (in order) in one base64 buffer.
+struct GltfWriter {
+    nlohmann::json doc = {{"asset", {{"version", "2.0"}}}};
+    std::vector<unsigned char> bytes;
+
+    int floats(const std::vector<float>& values, const char* type) {
+        const std::size_t offset = bytes.size();
+        const auto* p = reinterpret_cast<const unsigned char*>(values.data());
+        bytes.insert(bytes.end(), p, p + values.size() * sizeof(float));
+        const int components = std::string(type) == "SCALAR" ? 1
+                               : std::string(type) == "VEC3" ? 3
+                                                             : 4;
+        doc["bufferViews"].push_back(
+            {{"buffer", 0}, {"byteOffset", offset}, {"byteLength", values.size() * 4}});
+        nlohmann::json accessor = {{"bufferView", doc["bufferViews"].size() - 1},
+                                   {"componentType", 5126},
+                                   {"count", values.size() / std::size_t(components)},
+                                   {"type", type}};
+        if (components == 3 && doc["meshes"].is_null()) { // the first VEC3 is a position
+            accessor["min"] = {0, 0, 0};
+            accessor["max"] = {1, 1, 0};
+        }
+        doc["accessors"].push_back(accessor);
+        return int(doc["accessors"].size() - 1);
+    }
+    void write(const fs::path& path) {
+        static constexpr char kDigits[] =
+            "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        std::string base64;
+        for (std::size_t i = 0; i < bytes.size(); i += 3) {
+            const std::uint32_t n = std::uint32_t(bytes[i]) << 16 |
+                                    (i + 1 < bytes.size() ? std::uint32_t(bytes[i + 1]) << 8 : 0) |
+                                    (i + 2 < bytes.size() ? std::uint32_t(bytes[i + 2]) : 0);
+            base64 += kDigits[n >> 18 & 63];
+            base64 += kDigits[n >> 12 & 63];
+            base64 += i + 1 < bytes.size() ? kDigits[n >> 6 & 63] : '=';
+            base64 += i + 2 < bytes.size() ? kDigits[n & 63] : '=';
+        }
+        doc["buffers"] = {{{"byteLength", bytes.size()},
+                           {"uri", "data:application/octet-stream;base64," + base64}}};
+        std::ofstream(path) << doc.dump();
+    }
+};
+
+TEST(GltfImport, AnimationsBecomeScriptedPathsOfMobiles) {
+    GltfWriter w;
+    const int triangle = w.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+    w.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", triangle}}}}}}}};
+    w.doc["nodes"] = {{{"name", "Crate"}, {"mesh", 0}, {"extras", {{"mobility", "mobile"}}}},
+                      {{"name", "Wall"}, {"mesh", 0}, {"translation", {0, 0, -3}}},
+                      {{"name", "Cart"}, {"mesh", 0}, {"extras", {{"mobility", "mobile"}}}}};
+    w.doc["scenes"] = {{{"nodes", {0, 1, 2}}}};
+    const float h = std::sqrt(0.5f);
+    const int t3 = w.floats({0, 1, 2}, "SCALAR");
+    const int moves = w.floats({0, 0, 0, 1, 0, 0, 1, 2, 0}, "VEC3");
+    const int t2 = w.floats({0.5f, 1.5f}, "SCALAR");
+    const int turns = w.floats({0, 0, 0, 1, 0, h, 0, h}, "VEC4"); // identity, 90 deg about y
+    const int wallMoves = w.floats({0, 0, -3, 0, 1, -3}, "VEC3");
+    const int t01 = w.floats({0, 1}, "SCALAR");
+    // Cubic spline: (in-tangent, value, out-tangent) per key.
+    const int spline = w.floats({9, 9, 9, 5, 0, 0, 9, 9, 9, 9, 9, 9, 6, 0, 0, 9, 9, 9}, "VEC3");
+    w.doc["animations"] = {
+        {{"samplers",
+          {{{"input", t3}, {"output", moves}},
+           {{"input", t2}, {"output", turns}, {"interpolation", "STEP"}},
+           {{"input", t01}, {"output", wallMoves}},
+           {{"input", t01}, {"output", spline}, {"interpolation", "CUBICSPLINE"}}}},
+         {"channels",
+          {{{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}},
+           {{"sampler", 1}, {"target", {{"node", 0}, {"path", "rotation"}}}},
+           {{"sampler", 2}, {"target", {{"node", 1}, {"path", "translation"}}}},
+           {{"sampler", 0}, {"target", {{"node", 0}, {"path", "scale"}}}},
+           {{"sampler", 3}, {"target", {{"node", 2}, {"path", "translation"}}}}}}}};
+    const fs::path path = fs::path(::testing::TempDir()) / "animated.gltf";
+    w.write(path);
+    Registry registry;
+    importGltf(registry, path, kNoRefinement);
+
+    // The crate: keys at both channels' times, and just before the held rotation changes.
+    const PathFollower* crate = registry.tryGet<PathFollower>(entityNamed(registry, "Crate"));
+    ASSERT_NE(crate, nullptr);
+    EXPECT_TRUE(crate->loop);
+    const std::vector<float> times{0.f, 0.5f, 1.f, 1.5f - 1e-3f, 1.5f, 2.f};
+    ASSERT_EQ(crate->keys.size(), times.size());
+    const glm::quat identity(1.f, 0.f, 0.f, 0.f);
+    const glm::quat quarter = glm::angleAxis(glm::half_pi<float>(), glm::vec3(0, 1, 0));
+    for (std::size_t k = 0; k < times.size(); ++k) {
+        SCOPED_TRACE(k);
+        EXPECT_NEAR(crate->keys[k].time, times[k], 1e-6f);
+        const float t = times[k];
+        const glm::vec3 position = t <= 1.f ? glm::vec3(t, 0, 0) : glm::vec3(1, 2 * (t - 1), 0);
+        EXPECT_NEAR(glm::length(crate->keys[k].position - position), 0.f, 1e-5f);
+        const glm::quat expected = t < 1.5f ? identity : quarter; // STEP holds each value
+        EXPECT_NEAR(std::abs(glm::dot(crate->keys[k].rotation, expected)), 1.f, 1e-6f);
+    }
+    // The wall is static: its animation is ignored. The cart's spline keeps its values.
+    EXPECT_FALSE(registry.has<PathFollower>(entityNamed(registry, "Wall")));
+    const PathFollower* cart = registry.tryGet<PathFollower>(entityNamed(registry, "Cart"));
+    ASSERT_NE(cart, nullptr);
+    ASSERT_EQ(cart->keys.size(), 2u);
+    EXPECT_EQ(cart->keys[0].position, glm::vec3(5, 0, 0));
+    EXPECT_EQ(cart->keys[1].position, glm::vec3(6, 0, 0));
+    fs::remove(path);
 }
 
 TEST(GltfImport, LoadSceneTakesGltfPathsAndNamesTheBuiltinsOnATypo) {
