@@ -9,7 +9,7 @@
 //  - node extras say {"mobility": "static" | "mobile"} or {"avatar": true} on every mesh node,
 //    so no tag depends on inheritance, and {"pointCache": true} on PointCacheShaded ones.
 //  - a PathFollower becomes LINEAR translation and rotation channels of one animation, with its
-//    loop and time offset in the node's extras {"path": {...}}.
+//    loop and time offset in the node's extras {"qgiPath": {...}}.
 //  - emission above 1 is split into emissiveFactor (max component 1) and
 //    KHR_materials_emissive_strength; lights go to KHR_lights_punctual (one per node); the
 //    active camera is written as cameras[0], which the importer makes active.
@@ -109,7 +109,7 @@ int addMesh(tinygltf::Model& model, std::vector<unsigned char>& buffer, const Me
 
 /// A scripted path as glTF animation channels on `node` (LINEAR translation and rotation over
 /// the path's key times), in the file's one animation. What glTF cannot say, the loop and the
-/// time offset, goes to the node's extras as {"path": {"loop": bool, "timeOffset": s}}.
+/// time offset, goes to the node's extras as {"qgiPath": {"loop": bool, "timeOffset": s}}.
 void addPathAnimation(tinygltf::Model& model, std::vector<unsigned char>& buffer,
                       const PathFollower& path, int node) {
     std::vector<float> times;
@@ -145,7 +145,7 @@ void addPathAnimation(tinygltf::Model& model, std::vector<unsigned char>& buffer
     tinygltf::Node& n = model.nodes[std::size_t(node)];
     tinygltf::Value::Object extras =
         n.extras.IsObject() ? n.extras.Get<tinygltf::Value::Object>() : tinygltf::Value::Object{};
-    extras["path"] = tinygltf::Value(
+    extras["qgiPath"] = tinygltf::Value(
         tinygltf::Value::Object{{"loop", tinygltf::Value(path.loop)},
                                 {"timeOffset", tinygltf::Value(double(path.timeOffset))}});
     n.extras = tinygltf::Value(std::move(extras));

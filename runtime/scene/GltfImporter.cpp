@@ -381,7 +381,7 @@ private:
     /// Turns the animations' translation and rotation channels into PathFollowers on the
     /// records of their nodes (see the header).
     void readAnimations(std::vector<EntityRecord>& records) const;
-    /// Node extras {"path": {"loop": bool, "timeOffset": s}} (what glTF cannot say).
+    /// Node extras {"qgiPath": {"loop": bool, "timeOffset": s}} (what glTF cannot say).
     void readPathExtras(int index, PathFollower& path) const;
     std::vector<float> readScalars(const std::string& usage, int index) const;
     std::vector<glm::vec4> readRotations(const std::string& usage, int index) const;
@@ -390,8 +390,9 @@ private:
     /// Refuses a scene so far from the origin that float positions cannot resolve it, and
     /// warns where they resolve it only coarsely.
     void checkPrecision(const Aabb& bounds) const;
-    /// Refuses a mesh node whose world matrix scales an axis to nearly nothing or beyond reason.
-    void checkMeshScale(const std::string& field, const glm::mat4& world) const;
+    /// Refuses a mesh node whose world matrix scales beyond reason; false (with a warning) when
+    /// it scales an axis to nearly nothing, which hides the mesh.
+    bool checkMeshScale(const std::string& field, const glm::mat4& world) const;
 
     fs::path mPath;
     fs::path mFolder;
@@ -876,7 +877,6 @@ std::vector<std::uint32_t> GltfReader::readIndices(const std::string& usage, int
         useAccessor(usage, index, TINYGLTF_TYPE_SCALAR,
                     {TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT,
                      TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT});
-    if (a.count % 3 != 0) fail(usage, a.count, " indices is not a multiple of 3");
     std::vector<std::uint32_t> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         const unsigned char* p = a.data + i * a.stride;
@@ -905,16 +905,28 @@ std::vector<RawPrimitive> GltfReader::readMesh(int meshIndex) const {
         RawPrimitive raw;
         raw.field = str("meshes[", meshIndex, "].primitives[", p, "]");
         const int mode = primitive.mode < 0 ? TINYGLTF_MODE_TRIANGLES : primitive.mode;
-        if (mode != TINYGLTF_MODE_TRIANGLES)
-            fail(raw.field + ".mode", mode, " (", modeName(mode),
-                 ") is not supported; only TRIANGLES (4)");
+        if (mode == TINYGLTF_MODE_POINTS || mode == TINYGLTF_MODE_LINE ||
+            mode == TINYGLTF_MODE_LINE_LOOP || mode == TINYGLTF_MODE_LINE_STRIP) {
+            logWarning(mLabel, ": ", raw.field, ".mode: ", modeName(mode),
+                       " has no surface to light; skipped");
+            continue;
+        }
+        if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+            mode != TINYGLTF_MODE_TRIANGLE_FAN)
+            fail(raw.field + ".mode", mode, " is not a glTF 2.0 primitive mode");
         const auto attribute = [&](const char* name) {
             const auto it = primitive.attributes.find(name);
             return it == primitive.attributes.end() ? -1 : it->second;
         };
         const std::string attributes = raw.field + ".attributes.";
         const int position = attribute("POSITION");
-        if (position < 0) fail(attributes + "POSITION", "missing");
+        if (position < 0) { // allowed by glTF, but nothing to draw or light
+            logWarning(mLabel, ": ", attributes, "POSITION: missing; the primitive is skipped");
+            continue;
+        }
+        if (attribute("COLOR_0") >= 0)
+            logWarning(mLabel, ": ", attributes,
+                       "COLOR_0: vertex colours are not imported (baseColorFactor is the albedo)");
         raw.mesh.positions = readVec3(attributes + "POSITION", position);
         const std::size_t count = raw.mesh.positions.size();
         const auto checkCount = [&](const std::string& field, std::size_t n) {
@@ -928,15 +940,29 @@ std::vector<RawPrimitive> GltfReader::readMesh(int meshIndex) const {
             raw.mesh.uvs = readTexcoords(attributes + "TEXCOORD_0", uv);
             checkCount(attributes + "TEXCOORD_0", raw.mesh.uvs.size());
         }
+        std::vector<std::uint32_t> order;
         if (primitive.indices >= 0) {
-            raw.mesh.indices = readIndices(raw.field + ".indices", primitive.indices, count);
+            order = readIndices(raw.field + ".indices", primitive.indices, count);
         } else {
-            if (count % 3 != 0)
-                fail(attributes + "POSITION", count, " vertices without indices is not a ",
-                     "multiple of 3");
-            raw.mesh.indices.resize(count);
+            order.resize(count);
             for (std::size_t i = 0; i < count; ++i)
-                raw.mesh.indices[i] = std::uint32_t(i);
+                order[i] = std::uint32_t(i);
+        }
+        const std::string orderField =
+            primitive.indices >= 0 ? raw.field + ".indices" : attributes + "POSITION";
+        if (mode == TINYGLTF_MODE_TRIANGLES) {
+            if (order.size() % 3 != 0)
+                fail(orderField, order.size(), " vertices is not a multiple of 3");
+            raw.mesh.indices = std::move(order);
+        } else { // a strip or a fan, as a list (glTF 2.0 section 3.7.2.1)
+            for (std::size_t i = 0; i + 2 < order.size(); ++i) {
+                if (mode == TINYGLTF_MODE_TRIANGLE_STRIP)
+                    raw.mesh.indices.insert(raw.mesh.indices.end(),
+                                            {order[i], order[i + 1 + i % 2], order[i + 2 - i % 2]});
+                else
+                    raw.mesh.indices.insert(raw.mesh.indices.end(),
+                                            {order[i + 1], order[i + 2], order[0]});
+            }
         }
         if (primitive.material != -1)
             checkIndex(raw.field + ".material", primitive.material, mModel.materials.size(),
@@ -966,6 +992,11 @@ Material GltfReader::readMaterial(int index) const {
         return c;
     };
 
+    if (m.alphaMode == "MASK" || m.alphaMode == "BLEND")
+        logWarning(mLabel, ": ", field, ".alphaMode: ", m.alphaMode,
+                   " is drawn and lit as OPAQUE (cut-outs block light)");
+    if (m.pbrMetallicRoughness.baseColorTexture.extensions.count("KHR_texture_transform"))
+        logWarning(mLabel, ": ", pbr, ".baseColorTexture: KHR_texture_transform is ignored");
     Material material;
     material.baseColor = color(pbr + ".baseColorFactor", m.pbrMetallicRoughness.baseColorFactor, 4);
     unit(pbr + ".baseColorFactor[3]", m.pbrMetallicRoughness.baseColorFactor[3]); // alpha
@@ -988,6 +1019,11 @@ Material GltfReader::readMaterial(int index) const {
         checkIndex(pbr + ".baseColorTexture.index", texture.index, mModel.textures.size(),
                    "textures");
         const int source = mModel.textures[std::size_t(texture.index)].source;
+        if (source == -1) { // allowed (an extension may name the image): no texture here
+            logWarning(mLabel, ": textures[", texture.index,
+                       "].source: missing; the material is drawn untextured");
+            return material;
+        }
         checkIndex(str("textures[", texture.index, "].source"), source, mModel.images.size(),
                    "images");
         if (texture.texCoord != 0)
@@ -1008,21 +1044,23 @@ std::optional<Camera> GltfReader::readCamera(int index) const {
     if (c.type != "perspective")
         fail(field + ".type", "'", c.type, "' is not perspective or orthographic");
     const tinygltf::PerspectiveCamera& p = c.perspective;
-    // Beyond about 170 degrees a perspective projection is all distortion; below a micrometre
-    // (or a zfar within 0.1% of it) float depth has no precision left.
-    if (!(p.yfov >= 1e-3 && p.yfov <= 3.0))
-        fail(field + ".perspective.yfov", p.yfov, " is not in [0.001, 3] radians");
-    if (!(p.znear >= 1e-6 && p.znear < 1e30))
-        fail(field + ".perspective.znear", p.znear, " is not at least 1e-6 m");
+    if (!(p.yfov > 0.0 && p.yfov < std::numbers::pi))
+        fail(field + ".perspective.yfov", p.yfov, " is not in (0, pi)");
+    if (!(p.znear > 0.0 && p.znear < 1e30))
+        fail(field + ".perspective.znear", p.znear, " is not > 0");
+    if (p.zfar != 0.0 && !(p.zfar > p.znear && p.zfar < 1e30))
+        fail(field + ".perspective.zfar", p.zfar, " is not beyond znear ", p.znear);
+    // Valid glTF, but past what float projection and depth resolve (a black frame): within
+    // 0.002 rad of a half turn, nearer than a micrometre, or a depth range under 0.1%.
     Camera camera;
-    camera.yfov = float(p.yfov);
-    camera.znear = float(p.znear);
-    if (p.zfar != 0.0) { // 0: absent, an infinite projection; the component's default stands in
-        if (!(p.zfar >= 1.001 * p.znear && p.zfar < 1e30))
-            fail(field + ".perspective.zfar", p.zfar, " is not beyond znear ", p.znear,
-                 " by at least 0.1%");
-        camera.zfar = float(p.zfar);
-    }
+    camera.yfov = float(std::clamp(p.yfov, 1e-3, std::numbers::pi - 2e-3));
+    camera.znear = float(std::max(p.znear, 1e-6));
+    if (p.zfar != 0.0) // 0: absent, an infinite projection; the component's default stands in
+        camera.zfar = std::max(float(p.zfar), 1.001f * camera.znear);
+    if (camera.yfov != float(p.yfov) || camera.znear != float(p.znear) ||
+        (p.zfar != 0.0 && camera.zfar != float(p.zfar)))
+        logWarning(mLabel, ": ", field, ".perspective: adjusted to yfov ", camera.yfov, ", znear ",
+                   camera.znear, ", zfar ", camera.zfar, " (what float depth can resolve)");
     return camera;
 }
 
@@ -1237,6 +1275,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
         const std::string field = str("nodes[", index, "]");
         const int self = int(records.size());
         mNodeRecord[std::size_t(index)] = self;
+        bool hidden = false; // a mesh node scaled to nothing
         {
             EntityRecord record;
             record.name = node.name.empty() ? field : node.name;
@@ -1249,15 +1288,18 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                            glm::toMat4(t.rotation) * glm::scale(glm::mat4(1.f), t.scale);
             if (!isFinite(record.world))
                 fail(field, "world transform overflows (translation or scale too large)");
-            if (node.mesh != -1) checkMeshScale(field, record.world);
+            if (node.mesh != -1) hidden = !checkMeshScale(field, record.world);
             record.mobility = nodeMobility(index).value_or(
                 parent >= 0 ? records[std::size_t(parent)].mobility : Mobility::Static);
             if (node.camera != -1) {
                 checkIndex(field + ".camera", node.camera, mModel.cameras.size(), "cameras");
                 record.camera = readCamera(node.camera);
-                for (int c = 0; c < 3; ++c)
-                    if (!(glm::length(glm::vec3(record.world[c])) > 1e-12f))
-                        fail(field, "a camera node whose world scale is zero sees nothing");
+                for (int c = 0; c < 3 && record.camera; ++c)
+                    if (!(glm::length(glm::vec3(record.world[c])) > 1e-12f)) {
+                        logWarning(mLabel, ": ", field,
+                                   ": a camera whose node scales to zero sees nothing; skipped");
+                        record.camera.reset();
+                    }
                 if (record.camera && node.camera < activeCameraIndex) {
                     activeCameraIndex = node.camera;
                     activeRecord = records.size();
@@ -1270,7 +1312,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                 fail(field + ".extras.pointCache", "the point cache shades static meshes only");
             records.push_back(std::move(record));
         }
-        if (node.mesh != -1) {
+        if (node.mesh != -1 && !hidden) {
             checkIndex(field + ".mesh", node.mesh, mModel.meshes.size(), "meshes");
             if (node.skin != -1)
                 logWarning(mLabel, ": ", field,
@@ -1391,25 +1433,36 @@ std::vector<float> GltfReader::readScalars(const std::string& usage, int index) 
 }
 
 std::vector<glm::vec4> GltfReader::readRotations(const std::string& usage, int index) const {
-    // Floats, or normalized signed integers (glTF allows both for rotations).
-    const AccessorData a = useAccessor(usage, index, TINYGLTF_TYPE_VEC4,
-                                       {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE,
-                                        TINYGLTF_COMPONENT_TYPE_SHORT});
+    // Floats, or normalized integers of either sign (glTF allows all for rotations). Not
+    // normalised here: a cubic spline's tangents are not rotations.
+    const AccessorData a =
+        useAccessor(usage, index, TINYGLTF_TYPE_VEC4,
+                    {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE,
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_SHORT,
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT});
     std::vector<glm::vec4> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         const unsigned char* p = a.data + i * a.stride;
         for (int c = 0; c < 4; ++c) {
-            if (a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT)
+            switch (a.componentType) {
+            case TINYGLTF_COMPONENT_TYPE_FLOAT:
                 out[i][c] = load<float>(p + 4 * c);
-            else if (a.componentType == TINYGLTF_COMPONENT_TYPE_BYTE)
+                break;
+            case TINYGLTF_COMPONENT_TYPE_BYTE:
                 out[i][c] = std::max(float(load<std::int8_t>(p + c)) / 127.f, -1.f);
-            else
+                break;
+            case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+                out[i][c] = float(p[c]) / 255.f;
+                break;
+            case TINYGLTF_COMPONENT_TYPE_SHORT:
                 out[i][c] = std::max(float(load<std::int16_t>(p + 2 * c)) / 32767.f, -1.f);
+                break;
+            default:
+                out[i][c] = float(load<std::uint16_t>(p + 2 * c)) / 65535.f;
+            }
         }
-        const float length = glm::length(out[i]);
-        if (!(length > 1e-6f) || !std::isfinite(length))
-            fail(usage, "element ", i, " is not a rotation (zero or not finite)");
-        out[i] /= length;
+        if (!isFinite(glm::vec3(out[i])) || !std::isfinite(out[i].w))
+            fail(usage, "element ", i, " is not finite");
     }
     return out;
 }
@@ -1489,6 +1542,13 @@ void GltfReader::readAnimations(std::vector<EntityRecord>& records) const {
             if (out.values.size() != out.times.size())
                 fail(samplerField + ".output", out.values.size(), " values for ", out.times.size(),
                      " key times");
+            if (path == "rotation")
+                for (std::size_t k = 0; k < out.values.size(); ++k) {
+                    const float length = glm::length(out.values[k]);
+                    if (!(length > 1e-6f))
+                        fail(samplerField + ".output", "key ", k, " is not a rotation (zero)");
+                    out.values[k] /= length;
+                }
             Animated& node = nodes[channel.target_node];
             std::optional<Channel>& slot = path == "translation" ? node.translation : node.rotation;
             if (slot) {
@@ -1561,9 +1621,9 @@ void GltfReader::readAnimations(std::vector<EntityRecord>& records) const {
 
 void GltfReader::readPathExtras(int index, PathFollower& path) const {
     const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
-    if (!extras.IsObject() || !extras.Has("path")) return;
-    const std::string field = str("nodes[", index, "].extras.path");
-    const tinygltf::Value& p = extras.Get("path");
+    if (!extras.IsObject() || !extras.Has("qgiPath")) return;
+    const std::string field = str("nodes[", index, "].extras.qgiPath");
+    const tinygltf::Value& p = extras.Get("qgiPath");
     if (!p.IsObject()) fail(field, "must be an object {\"loop\": bool, \"timeOffset\": seconds}");
     if (p.Has("loop")) {
         if (!p.Get("loop").IsBool()) fail(field + ".loop", "must be true or false");
@@ -1577,16 +1637,24 @@ void GltfReader::readPathExtras(int index, PathFollower& path) const {
     }
 }
 
-void GltfReader::checkMeshScale(const std::string& field, const glm::mat4& world) const {
-    // Within these a mesh keeps float precision in its own units and in world units alike;
-    // outside them a flattened or exploded mesh would fail later, deep in a lighting system.
+bool GltfReader::checkMeshScale(const std::string& field, const glm::mat4& world) const {
+    // Within these a mesh keeps float precision in its own units and in world units alike.
+    // A scale towards zero is how files hide a mesh (or flatten it to nothing): it is left
+    // out. A huge one is a mistake that would fail later, deep in a lighting system.
     constexpr double kMinScale = 1e-8, kMaxScale = 1e8;
     const glm::dvec3 scale(glm::length(glm::dvec3(world[0])), glm::length(glm::dvec3(world[1])),
                            glm::length(glm::dvec3(world[2])));
     for (int a = 0; a < 3; ++a)
-        if (!(scale[a] >= kMinScale && scale[a] <= kMaxScale))
+        if (!(scale[a] <= kMaxScale))
             fail(field, "world scale (", scale.x, ", ", scale.y, ", ", scale.z,
-                 ") of a mesh node is outside [", kMinScale, ", ", kMaxScale, "]");
+                 ") of a mesh node is above ", kMaxScale);
+    for (int a = 0; a < 3; ++a)
+        if (!(scale[a] >= kMinScale)) {
+            logWarning(mLabel, ": ", field, ": world scale (", scale.x, ", ", scale.y, ", ",
+                       scale.z, ") hides its mesh; skipped");
+            return false;
+        }
+    return true;
 }
 
 void GltfReader::checkPrecision(const Aabb& bounds) const {

@@ -29,7 +29,7 @@
  *    node (keys at every time of either channel; LINEAR blends, STEP holds, CUBICSPLINE keeps
  *    its values and blends them linearly; all animations of the file play together). Scale
  *    and morph-weight channels are skipped with a warning (mobiles are rigid), and so is the
- *    animation of a node that would move a static mesh. Node extras {"path": {"loop": bool,
+ *    animation of a node that would move a static mesh. Node extras {"qgiPath": {"loop": bool,
  *    "timeOffset": s}} set what glTF cannot say (the exporter writes them).
  *  - Resources: SceneInfo (name = file stem, source = path) and TextureLibrary (every image of
  *    the file, decoded to 8-bit RGBA, in file order).

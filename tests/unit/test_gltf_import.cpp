@@ -361,9 +361,14 @@ struct GltfWriter {
                                    {"componentType", 5126},
                                    {"count", values.size() / std::size_t(components)},
                                    {"type", type}};
-        if (components == 3 && doc["meshes"].is_null()) { // the first VEC3 is a position
-            accessor["min"] = {0, 0, 0};
-            accessor["max"] = {1, 1, 0};
+        if (components == 3) { // positions need their bounds
+            std::vector<float> lo(3, 1e30f), hi(3, -1e30f);
+            for (std::size_t i = 0; i < values.size(); ++i) {
+                lo[i % 3] = std::min(lo[i % 3], values[i]);
+                hi[i % 3] = std::max(hi[i % 3], values[i]);
+            }
+            accessor["min"] = lo;
+            accessor["max"] = hi;
         }
         doc["accessors"].push_back(accessor);
         return int(doc["accessors"].size() - 1);
@@ -445,6 +450,66 @@ TEST(GltfImport, AnimationsBecomeScriptedPathsOfMobiles) {
     ASSERT_EQ(cart->keys.size(), 2u);
     EXPECT_EQ(cart->keys[0].position, glm::vec3(5, 0, 0));
     EXPECT_EQ(cart->keys[1].position, glm::vec3(6, 0, 0));
+    fs::remove(path);
+}
+
+TEST(GltfImport, ValidButUnusualFilesLoad) {
+    // Valid glTF that qgi cannot use as given: it adapts, with a warning, instead of refusing.
+    const fs::path dir = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "unusual";
+    const auto meshCount = [](const Registry& r) { return r.view<const Mesh>().entities().size(); };
+    {
+        Registry r; // a LINES primitive has no surface: skipped
+        importGltf(r, dir / "lines_only.gltf", kNoRefinement);
+        EXPECT_EQ(meshCount(r), 0u);
+    }
+    {
+        Registry r; // a node scaled to nothing hides its mesh
+        importGltf(r, dir / "mesh_node_flat_scale.gltf", kNoRefinement);
+        EXPECT_EQ(meshCount(r), 0u);
+    }
+    {
+        Registry r; // a camera whose node scales to zero sees nothing: not imported
+        importGltf(r, dir / "camera_zero_scale.gltf", kNoRefinement);
+        EXPECT_TRUE(r.view<const Camera>().entities().empty());
+        EXPECT_EQ(meshCount(r), 1u);
+    }
+    {
+        Registry r; // a field of view just under pi is narrowed to what projection resolves
+        importGltf(r, dir / "camera_fov_near_pi.gltf", kNoRefinement);
+        const auto cameras = r.view<const Camera>().entities();
+        ASSERT_EQ(cameras.size(), 1u);
+        EXPECT_LT(r.get<Camera>(cameras.front()).yfov, 3.14f);
+        EXPECT_GT(r.get<Camera>(cameras.front()).yfov, 3.13f);
+    }
+}
+
+TEST(GltfImport, StripsAndFansBecomeTriangleLists) {
+    GltfWriter w;
+    // Five vertices along a zigzag make a strip of three triangles, all facing -z; five around
+    // the origin make a fan of three (the first vertex with each later pair), facing +z.
+    const int zigzag = w.floats({0, 0, 0, 0, 1, 0, 1, 0, 0, 1, 1, 0, 2, 0, 0}, "VEC3");
+    const int around = w.floats({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, -1, 1, 0}, "VEC3");
+    w.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", zigzag}}}, {"mode", 5}}}}},
+                       {{"primitives", {{{"attributes", {{"POSITION", around}}}, {"mode", 6}}}}}};
+    w.doc["nodes"] = {{{"name", "Strip"}, {"mesh", 0}}, {{"name", "Fan"}, {"mesh", 1}}};
+    w.doc["scenes"] = {{{"nodes", {0, 1}}}};
+    const fs::path path = fs::path(::testing::TempDir()) / "strips.gltf";
+    w.write(path);
+    Registry registry;
+    importGltf(registry, path, kNoRefinement);
+    // The strip alternates its winding, so no triangle flips.
+    for (const char* name : {"Strip", "Fan"}) {
+        SCOPED_TRACE(name);
+        const Mesh& mesh = registry.get<Mesh>(entityNamed(registry, name));
+        ASSERT_EQ(mesh.indices.size(), 9u);
+        for (std::size_t t = 0; t < 9; t += 3) {
+            const glm::vec3 a = mesh.positions[mesh.indices[t]];
+            const glm::vec3 b = mesh.positions[mesh.indices[t + 1]];
+            const glm::vec3 c = mesh.positions[mesh.indices[t + 2]];
+            EXPECT_GT(glm::cross(b - a, c - a).z * (std::string(name) == "Fan" ? 1.f : -1.f), 0.f)
+                << "triangle " << t / 3;
+        }
+    }
     fs::remove(path);
 }
 
