@@ -96,8 +96,17 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     mSkipsDirect.assign(store->lights.size(), 0);
     for (std::size_t l = 0; l < store->lights.size(); ++l)
         mSkipsDirect[l] = mSettings.hybrid && store->lights[l].directDrawn;
+    // A delta applied twice (the photon update skipped a frame) would count its change twice;
+    // one missed (DETP skipped a frame) would leave it out: apply each once, re-estimate in
+    // full after a gap. Hand-made deltas (sequence 0) are always new.
+    static const PhotonDelta kNothingNew;
+    const bool repeated = delta->sequence != 0 && delta->sequence == mLastSequence;
+    const bool gap = delta->sequence != 0 && mLastSequence != 0 && !repeated &&
+                     delta->sequence != mLastSequence + 1;
+    mLastSequence = delta->sequence;
+    if (repeated) delta = &kNothingNew;
     collectMovedMobiles(registry, *delta);
-    const bool full = delta->full || mNeedsFull;
+    const bool full = delta->full || mNeedsFull || gap;
     mNeedsFull = false;
     switch (mSettings.estimator) {
     case IrradianceEstimator::Detp:
@@ -391,8 +400,16 @@ void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& 
         publishAll(registry);
         return;
     }
-    if (delta.paths.empty()) return; // rigid mobiles keep their triangles' areas: no change
+    // Rigid mobiles keep their triangles' areas: only changed impacts count.
+    if (delta.paths.empty() && delta.relabels.empty()) return;
     mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
+    // Kept landings that slid onto another triangle of the same face.
+    for (const PhotonRelabel& r : delta.relabels) {
+        const std::size_t s = store.segmentIndex(r.path, r.k);
+        if (!counted(store.segments, s, store.paths[r.path].light)) continue;
+        mImpacts.moveImpact(mReceivers, store.segments.hitEntity[s], r.oldPrimitive, r.newPrimitive,
+                            store.segments.power[s]);
+    }
     for (const bool before : {true, false}) {
         const PhotonSegments& segments = before ? delta.oldSegments : delta.newSegments;
         const std::vector<std::uint32_t>& first = before ? delta.oldFirst : delta.newFirst;

@@ -137,6 +137,7 @@ private:
     float mPhotonMapRadius = 0.f;
     bool mBuilt = false;
     bool mNeedsFull = true;
+    std::uint64_t mLastSequence = 0; ///< PhotonDelta::sequence last applied
     FrameStats mStats;
 
     ReceiverSet mReceivers;

@@ -57,14 +57,29 @@ void ImpactCounter::accumulate(const ReceiverSet& receivers, const PhotonSegment
         QGI_ASSERT(segments.hitPrimitive[s] < receiver.triangleCount, "segment ", s,
                    " hit triangle ", segments.hitPrimitive[s], " of a mesh with ",
                    receiver.triangleCount);
-        const std::uint32_t t = receiver.firstTriangle + segments.hitPrimitive[s];
-        mTrianglePower[t] += sign * glm::dvec3(segments.power[s]);
-        mMaxUpdates = std::max(mMaxUpdates, ++mUpdateCount[t]);
-        if (!mTriangleTouched[t]) {
-            mTriangleTouched[t] = 1;
-            mTouchedTriangles.push_back(t);
-        }
+        add(receiver.firstTriangle + segments.hitPrimitive[s], segments.power[s], sign);
     }
+}
+
+void ImpactCounter::add(std::uint32_t t, const glm::vec3& power, double sign) {
+    mTrianglePower[t] += sign * glm::dvec3(power);
+    mMaxUpdates = std::max(mMaxUpdates, ++mUpdateCount[t]);
+    if (!mTriangleTouched[t]) {
+        mTriangleTouched[t] = 1;
+        mTouchedTriangles.push_back(t);
+    }
+}
+
+void ImpactCounter::moveImpact(const ReceiverSet& receivers, Entity hit, std::uint32_t from,
+                               std::uint32_t to, const glm::vec3& power) {
+    const std::int64_t r = receivers.find(hit);
+    if (r < 0) return; // not a receiver
+    const auto& receiver = receivers.receivers()[std::size_t(r)];
+    QGI_ASSERT(from < receiver.triangleCount && to < receiver.triangleCount,
+               "impact moved between triangles ", from, " and ", to, " of a mesh with ",
+               receiver.triangleCount);
+    add(receiver.firstTriangle + from, power, -1.0);
+    add(receiver.firstTriangle + to, power, 1.0);
 }
 
 void ImpactCounter::takeTouchedVertices(std::vector<std::uint32_t>& out) {

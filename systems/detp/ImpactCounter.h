@@ -1,5 +1,7 @@
 #pragma once
 
+#include "runtime/ecs/Entity.h"
+
 #include <glm/vec3.hpp>
 
 #include <cstdint>
@@ -29,6 +31,10 @@ public:
     /// triangle. Sequential, in index order: the same calls give bit-identical sums.
     void accumulate(const ReceiverSet& receivers, const PhotonSegments& segments,
                     std::span<const std::uint32_t> indices, double sign);
+    /// An impact of `power` on mesh `hit` that moved from triangle `from` to triangle `to`
+    /// (PhotonDelta::relabels).
+    void moveImpact(const ReceiverSet& receivers, Entity hit, std::uint32_t from, std::uint32_t to,
+                    const glm::vec3& power);
 
     /// The vertices around triangles that accumulate() changed since the last call, ascending;
     /// forgets them.
@@ -43,6 +49,9 @@ public:
     std::uint32_t maxUpdates() const { return mMaxUpdates; }
 
 private:
+    /// Adds sign x power to triangle `primitive` of receiver `receiver`.
+    void add(std::uint32_t triangle, const glm::vec3& power, double sign);
+
     std::vector<glm::uvec3> mTriangles; ///< global vertex ids
     std::vector<glm::dvec3> mTrianglePower;
     std::vector<std::uint32_t> mUpdateCount; ///< per triangle, additions since reset()

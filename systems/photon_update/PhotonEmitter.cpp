@@ -202,6 +202,8 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
         prepareSurface(registry, emitter);
         break;
     }
+    // An intensity near float's limit overflows once spread over the sphere or a footprint.
+    if (!isFinite(emitter.power)) disable(emitter, "power", "overflows a float");
 }
 
 PhotonHead emitPhoton(const PhotonEmitter& emitter, std::uint32_t photon, std::uint64_t seed) {

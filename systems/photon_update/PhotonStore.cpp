@@ -67,6 +67,7 @@ void PhotonDelta::clear() {
     oldFirst.assign(1, 0);
     newFirst.assign(1, 0);
     movedMobiles.clear();
+    relabels.clear();
 }
 
 } // namespace qgi

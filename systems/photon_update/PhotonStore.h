@@ -103,6 +103,13 @@ void walkPathsPrefetched(const PhotonStore& store, std::span<const std::uint32_t
     }
 }
 
+/// A kept segment whose landing point stayed put but now lies on another triangle of the same
+/// flat mobile face (it slid under it): only the triangle index changed. Segment k of `path`.
+struct PhotonRelabel {
+    std::uint32_t path = 0, k = 0;
+    std::uint32_t oldPrimitive = 0, newPrimitive = 0;
+};
+
 /** This frame's change to the ray set (seed 000 sections 2.3-2.4): for each affected path,
  *  the suffix it had before (from its first affected segment on) and the suffix it has now.
  *  The head segments of an old and a new suffix share origin, direction and power.
@@ -115,8 +122,15 @@ struct PhotonDelta {
     std::vector<std::uint32_t> oldFirst; ///< per affected path: start in oldSegments (+1 entry)
     std::vector<std::uint32_t> newFirst; ///< per affected path: start in newSegments (+1 entry)
     std::vector<Entity> movedMobiles;    ///< the mobiles whose move caused the change
+    /// Kept segments that changed only their hit triangle (estimators that count per triangle
+    /// need them; geometry-based ones do not).
+    std::vector<PhotonRelabel> relabels;
+    /// Which photon update made it: 1, 2, ... one per update (kept by clear()); 0 for a delta
+    /// made by hand. A consumer that sees the same number twice has nothing new; one that sees
+    /// a number skipped missed a change and must re-estimate in full.
+    std::uint64_t sequence = 0;
 
-    bool empty() const { return !full && paths.empty(); }
+    bool empty() const { return !full && paths.empty() && relabels.empty(); }
     void clear();
 };
 

@@ -28,6 +28,9 @@ constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); //
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
 constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 changed paths
+// How far a light's power per photon may drift from the mean before photons are shared anew
+// (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
+constexpr double kShareDrift = 4.0;
 // reuseLandedPaths: a segment tested again lands where it did within this fraction of the
 // scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
 // it).
@@ -142,6 +145,7 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     PhotonPathGrid& grid =
         ctx.contains<PhotonPathGrid>() ? ctx.get<PhotonPathGrid>() : ctx.emplace<PhotonPathGrid>();
     delta.clear();
+    delta.sequence = ++mDeltaSequence;
     mStats = {};
 
     mSources.clear();
@@ -160,8 +164,11 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         scheduleReshoots();
         mRelabels.clear();
         findAffectedPaths(*scene, store, grid);
-        for (const Relabel& r : mRelabels)
+        for (const Relabel& r : mRelabels) {
+            delta.relabels.push_back(
+                {r.path, r.k, store.segments.hitPrimitive[r.segment], r.primitive});
             store.segments.hitPrimitive[r.segment] = r.primitive;
+        }
     }
     if (!mJobs.empty()) {
         const StageTimer timer(profiler, "trace", mStats.traceMs);
@@ -207,6 +214,29 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
         store.emittedPower = glm::vec3(0.f);
         for (const PhotonLight& light : store.lights)
             store.emittedPower += light.power;
+        if (sharesDrifted()) return true;
+    }
+    return false;
+}
+
+bool PhotonUpdateSystem::sharesDrifted() const {
+    // Photons carry equal power only as shot: a light that has since brightened carries more per
+    // photon than the rest (noisier, not biased), and one that lit up from next to nothing may
+    // have no photons at all (its light would be missing). Past kShareDrift of the mean power
+    // per photon, share them anew.
+    double total = 0.0, photons = 0.0;
+    for (const PhotonEmitter& e : mEmitters) {
+        total += double(e.power.x) + e.power.y + e.power.z;
+        photons += e.photonCount;
+    }
+    if (!(total > 0.0) || !(photons > 0.0)) return false;
+    const double mean = total / photons;
+    for (const PhotonEmitter& e : mEmitters) {
+        const double power = double(e.power.x) + e.power.y + e.power.z;
+        if (power <= 0.0) continue;
+        if (e.photonCount == 0) return true;
+        const double perPhoton = power / e.photonCount;
+        if (perPhoton > kShareDrift * mean || perPhoton * kShareDrift < mean) return true;
     }
     return false;
 }
@@ -485,7 +515,8 @@ std::int32_t PhotonUpdateSystem::firstToRetrace(const RayScene& scene, const Pho
         ++scratch.checked;
         std::uint32_t primitive = 0;
         if (!lands(scene, segments, s, *mobile, tolerance, primitive)) break; // re-traced from k
-        if (primitive != segments.hitPrimitive[s]) scratch.relabels.push_back({s, primitive});
+        if (primitive != segments.hitPrimitive[s])
+            scratch.relabels.push_back({s, primitive, p, std::uint32_t(k)});
         k = nextAffected(scene, store, p, std::uint32_t(k) + 1);
         scratch.kept += k < 0 ? 1 : 0;
     }

@@ -95,6 +95,7 @@ private:
     struct Relabel {
         std::size_t segment = 0;
         std::uint32_t primitive = 0;
+        std::uint32_t path = 0, k = 0; ///< the segment as (path, k), for PhotonDelta::relabels
     };
     struct MovedMobile {
         Entity entity;
@@ -127,8 +128,13 @@ private:
     };
 
     /// Compares this frame's light sources with those shot; prepares changed lights and starts
-    /// their sweeps. True when the set of shining lights changed (a full shot is due).
+    /// their sweeps. True when the set of shining lights changed, or the lights' powers drifted
+    /// from their photon shares (sharesDrifted): a full shot is due.
     bool detectLightChanges(const Registry& registry, PhotonStore& store);
+    /// Whether a shining light has no photons, or power per photon more than kShareDrift times
+    /// above or below the mean.
+    bool sharesDrifted() const;
+    std::uint64_t mDeltaSequence = 0; ///< PhotonDelta::sequence of the last update
     bool albedoChanged(const Registry& registry) const;
     void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,
                   PhotonPathGrid& grid);

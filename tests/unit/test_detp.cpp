@@ -629,6 +629,47 @@ TEST(Detp, DriftPolicySchedulesAFullReestimate) {
     EXPECT_EQ(fullFrames, (std::vector<int>{26, 52}));
 }
 
+TEST(Detp, EachDeltaIsAppliedOnceAndAMissedOneForcesAFullEstimate) {
+    IncrementalWorld world;
+    Registry& registry = world.registry;
+    std::mt19937 rng(12);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    for (int i = 0; i < 500; ++i)
+        appendPath(store,
+                   randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+    DetpSettings settings;
+    settings.discRadius = IncrementalWorld::kRadius;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    registry.ctx().get<PhotonDelta>().sequence = 1;
+    system.update(registry, {});
+    registry.clearChanges();
+    ASSERT_TRUE(system.lastFrame().full);
+
+    randomDelta(rng, world, 30);
+    registry.ctx().get<PhotonDelta>().sequence = 2;
+    system.update(registry, {});
+    registry.clearChanges();
+    EXPECT_FALSE(system.lastFrame().full);
+    EXPECT_GT(system.lastFrame().crossings, 0u);
+    const std::vector<glm::vec3> once = registry.get<VertexIrradiance>(world.floor).irradiance;
+    // The photon update did not run: the same delta again changes nothing.
+    system.update(registry, {});
+    registry.clearChanges();
+    EXPECT_FALSE(system.lastFrame().full);
+    EXPECT_EQ(system.lastFrame().crossings, 0u);
+    const std::vector<glm::vec3>& again = registry.get<VertexIrradiance>(world.floor).irradiance;
+    for (std::size_t v = 0; v < once.size(); ++v)
+        ASSERT_TRUE(bitEqual(again[v], once[v])) << v;
+    // DETP missed update 3: update 4 is estimated in full.
+    randomDelta(rng, world, 30);
+    registry.ctx().get<PhotonDelta>().sequence = 4;
+    system.update(registry, {});
+    registry.clearChanges();
+    EXPECT_TRUE(system.lastFrame().full);
+}
+
 TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     // A 4 m floor with photons all over it and a small plate: the paths near the plate are a
     // small part of the ray set.

@@ -2,7 +2,9 @@
 // against a full re-shoot, moving lights, energy in a closed box, settings checks.
 #include "systems/photon_update/PhotonUpdateSystem.h"
 
+#include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
+#include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonTracer.h"
@@ -352,6 +354,14 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
     firstUpdate(registry, system);
     // The room's box (walls and mobiles): the system's tolerance is a millionth of its diagonal.
     const float tolerance = 1e-6f * glm::length(glm::vec3(4.f, 3.f, 4.f));
+    // Impact count follows the deltas, relabelled landings included (checked at the end).
+    DetpSettings impactSettings;
+    impactSettings.estimator = IrradianceEstimator::ImpactCount;
+    impactSettings.discRadius = 0.05f;
+    DetpIrradianceSystem impacts(impactSettings);
+    impacts.build(registry);
+    impacts.update(registry, FrameContext{});
+    std::size_t relabels = 0;
 
     std::size_t landed = 0, retraced = 0;
     glm::mat4 pose(1.f);
@@ -367,11 +377,32 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
             });
         expectExactDelta(before, storeOf(registry), deltaOf(registry), expected, {room.cube});
         if (HasFatalFailure()) return;
+        impacts.update(registry, FrameContext{frame});
+        relabels += deltaOf(registry).relabels.size();
         landed += system.lastFrame().landedPaths;
         retraced += system.lastFrame().retracedPaths;
     }
     EXPECT_GT(landed, 1'000u); // the rule was exercised ...
     EXPECT_GT(retraced, 1'000u); // ... and so was re-tracing
+    EXPECT_GT(relabels, 10u);    // ... and landings slid onto the top face's other triangle
+    {
+        // Incremental impact count equals a full count over the final ray set, to the double
+        // sums' rounding (a misplaced landing would be off by a whole photon).
+        std::vector<std::vector<glm::vec3>> incremental;
+        const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
+        for (const Entity e : meshes)
+            incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
+        DetpIrradianceSystem reference(impactSettings);
+        reference.build(registry);
+        reference.update(registry, FrameContext{});
+        for (std::size_t m = 0; m < meshes.size(); ++m) {
+            const auto& full = registry.get<VertexIrradiance>(meshes[m]).irradiance;
+            for (std::size_t v = 0; v < full.size(); ++v)
+                for (int c = 0; c < 3; ++c)
+                    ASSERT_NEAR(incremental[m][v][c], full[v][c], 1e-6f * full[v][c] + 1e-9f)
+                        << "mesh " << m << " vertex " << v;
+        }
+    }
     // Every record is true of the scene now, to the tolerance the rule allows.
     expectHitsReproduce(storeOf(registry), scene, tolerance);
 
@@ -546,6 +577,32 @@ TEST(PhotonUpdate, AddingALightShootsEverythingAnew) {
     EXPECT_TRUE(deltaOf(registry).full);
     ASSERT_EQ(storeOf(registry).lights.size(), 2u);
     EXPECT_EQ(storeOf(registry).lights[1].photonCount, 3'000u); // 30 W/sr of 40 W/sr
+}
+
+TEST(PhotonUpdate, ALightThatOutgrowsItsPhotonShareIsSharedAnew) {
+    // A second lamp shot while nearly off gets no photons; when it brightens, photons are
+    // shared anew, or its light would never appear. A drift under 4x is kept.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 1e-6f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(4'000));
+    firstUpdate(registry, system);
+    ASSERT_EQ(storeOf(registry).lights.size(), 2u);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 0u);
+
+    const float roomIntensity = registry.get<PointLight>(room.light).intensity;
+    registry.patch<PointLight>(lamp).intensity = roomIntensity;
+    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+    registry.clearChanges();
+    EXPECT_TRUE(deltaOf(registry).full);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 2'000u);
+
+    registry.patch<PointLight>(lamp).intensity = 2.f * roomIntensity; // 4/3 of its share
+    system.update(registry, FrameContext{2, 0.0, 0.f, 0});
+    registry.clearChanges();
+    EXPECT_FALSE(deltaOf(registry).full);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 2'000u);
 }
 
 // ---- energy
