@@ -89,8 +89,11 @@ public:
     ~DetpIrradianceSystem();
 
     /// Set-up, once the scene, its WorldTransforms and the RayScene exist: reads the meshes,
-    /// resolves the disc radius and builds the disc indices. Call again after meshes are added
-    /// or removed. Throws qgi::Error on a mesh it cannot use or a missing resource.
+    /// resolves the disc radius and builds the disc indices. Throws qgi::Error on a mesh it
+    /// cannot use or a missing resource. (Meshes added or removed later need the photon ray set
+    /// rebuilt too: see PhotonUpdateSystem.)
+    /// Each PhotonDelta is applied once (PhotonDelta::sequence); after a missed one every
+    /// vertex is re-estimated.
     void build(Registry& registry);
 
     /// The frame: applies this frame's PhotonDelta (nothing to do while there is no

@@ -22,9 +22,10 @@ std::string_view irradianceEstimatorName(IrradianceEstimator estimator);
 struct DetpSettings {
     IrradianceEstimator estimator = IrradianceEstimator::Detp;
     /// Hybrid mode: the renderer draws the direct light of punctual lights (point, spot,
-    /// directional), so the segments that leave one (bounce 0) are not counted and their photons
-    /// carry only the light of later bounces. Emissive surfaces' photons count in full: the
-    /// renderer does not draw area lights. Photon mode (false) counts every segment.
+    /// directional) and of emissive surfaces with a LightStandIn, so the segments that leave
+    /// one of those (bounce 0) are not counted and their photons carry only the light of later
+    /// bounces. Other emissive surfaces' photons count in full: the renderer does not draw area
+    /// lights. Photon mode (false) counts every segment.
     bool hybrid = false;
     /// DETP disc radius r, metres. 0: the scene default, defaultDiscRadius().
     float discRadius = 0.f;

@@ -8,7 +8,7 @@ namespace qgi {
 /// `validatePhotonSettings` (called by the system's constructor) rejects absurd values.
 struct PhotonSettings {
     /// Photons emitted in all, shared among the lights in proportion to their power (the sum
-    /// of the RGB watts). Each photon is one stored path.
+    /// of the RGB watts) at each full shot. Each photon is one stored path.
     std::uint32_t photonCount = 200'000;
     /// Seeds every random choice: the quasi-random emission's scrambling and the per-bounce
     /// hash. Same seed, same scene: a bit-identical ray set.

@@ -27,9 +27,11 @@ class PhotonPathGrid;
 /** Keeps the photon ray set in step with the scene every frame (seed 000 sections 2.2-2.3,
  *  with seed 004's emission, frame-coherent seeding and progressive refinement).
  *
- *  Full shot (first frame; a light turned on or off, added or removed; a surface's albedo
- *  edited; every frame with fullRecompute): photons shared among the lights in proportion to
- *  power, every path traced, the path grid built; PhotonDelta::full.
+ *  Full shot (first frame; a light turned on or off, added or removed; a light whose power
+ *  drifted since the last full shot until it has no photons, or carries 4x more or less power
+ *  per photon than the mean; a surface's albedo edited; every frame with fullRecompute):
+ *  photons shared among the lights in proportion to power, every path traced, the path grid
+ *  built; PhotonDelta::full.
  *
  *  Otherwise incremental, and the delta lists exactly what changed:
  *   - Mobiles whose pose changed (the ray scene already holds the new pose): the paths with a
@@ -40,7 +42,12 @@ class PhotonPathGrid;
  *   - Lights that moved or changed: their own photons are re-shot with the same indices,
  *     reshootBudget photons per frame in all (shared evenly among such lights), oldest first,
  *     until each has been re-shot once since its last change; the delta reports each one with
- *     its whole old and new path. Until then the light's photons mix old and new shots.
+ *     its whole old and new path. Until then the light's photons mix old and new shots (a
+ *     light that moves every frame shows a smear over its last photons / reshootBudget
+ *     frames).
+ *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds (a
+ *  directional light's footprint) and its set of mobiles are captured at the first shot: a
+ *  scene whose meshes are added or removed needs a new RayScene and a new system.
  *  A re-traced path is rewritten in place when it fits, else appended; the store is compacted
  *  when its garbage passes compactionFraction. The grid is told which paths changed and
  *  re-indexes up to gridRefreshBudget paths a frame.
