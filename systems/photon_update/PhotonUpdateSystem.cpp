@@ -1,14 +1,19 @@
 #include "systems/photon_update/PhotonUpdateSystem.h"
 
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 
@@ -190,11 +195,33 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         grid.refresh(store, mSettings.gridRefreshBudget, store.pathCount() / kIdleChangedRatio);
 }
 
+/// Where the light stand-ins are (a stand-in added, removed, moved or retagged changes which
+/// emissive surfaces hybrid mode's renderer draws itself).
+std::uint64_t standInSignature(const Registry& registry) {
+    Fnv1aHasher h;
+    registry.view<const LightStandIn, const WorldTransform>().each(
+        [&](Entity e, const LightStandIn&, const WorldTransform& at) {
+            h.add(e.index);
+            h.add(glm::vec3(at.matrix[3]));
+            h.add(registry.has<PointLight>(e) || registry.has<SpotLight>(e));
+        });
+    return h.value();
+}
+
 bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store) {
     if (std::min(mSources.size(), kMaxLights) != mEmitters.size()) return true;
     for (std::size_t i = 0; i < mEmitters.size(); ++i)
         if (mSources[i].kind != mEmitters[i].kind || mSources[i].entity != mEmitters[i].entity)
             return true;
+    if (const std::uint64_t standIns = standInSignature(registry); standIns != mStandIns) {
+        mStandIns = standIns;
+        // A surface drawn by the shader (or no longer) counts its first segments otherwise:
+        // the stored lights' flags change, and DETP must start over.
+        for (const PhotonEmitter& e : mEmitters)
+            if (e.kind == EmitterKind::Surface &&
+                hasLightStandIn(registry, e.entity) != e.directDrawn)
+                return true;
+    }
     bool changed = false;
     for (std::size_t i = 0; i < mEmitters.size(); ++i) {
         PhotonEmitter& shot = mEmitters[i];
@@ -298,6 +325,10 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     }
     std::swap(mEmitters, mSources);
     allocatePhotons(mEmitters, mSettings.photonCount);
+    // Kept surfaces may have gained or lost their stand-in since they were prepared.
+    for (PhotonEmitter& e : mEmitters)
+        if (e.kind == EmitterKind::Surface) e.directDrawn = hasLightStandIn(registry, e.entity);
+    mStandIns = standInSignature(registry);
     mSweeps.assign(mEmitters.size(), Sweep{});
 
     mAlbedo.clear();

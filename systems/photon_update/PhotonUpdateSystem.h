@@ -142,6 +142,7 @@ private:
     /// above or below the mean.
     bool sharesDrifted() const;
     std::uint64_t mDeltaSequence = 0; ///< PhotonDelta::sequence of the last update
+    std::uint64_t mStandIns = 0;      ///< standInSignature at the last check
     bool albedoChanged(const Registry& registry) const;
     void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,
                   PhotonPathGrid& grid);

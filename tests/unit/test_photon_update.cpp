@@ -2,6 +2,7 @@
 // against a full re-shoot, moving lights, energy in a closed box, settings checks.
 #include "systems/photon_update/PhotonUpdateSystem.h"
 
+#include "components/LightStandIn.h"
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
 #include "systems/detp/DetpIrradianceSystem.h"
@@ -603,6 +604,42 @@ TEST(PhotonUpdate, ALightThatOutgrowsItsPhotonShareIsSharedAnew) {
     registry.clearChanges();
     EXPECT_FALSE(deltaOf(registry).full);
     EXPECT_EQ(storeOf(registry).lights[1].photonCount, 2'000u);
+}
+
+TEST(PhotonUpdate, AStandInAddedOrMovedAwayChangesWhatHybridModeCounts) {
+    // An emissive panel is drawn by the shader only while a stand-in bulb sits at it: adding
+    // one, or moving it away, changes whether its first segments count, so photons start over.
+    Registry registry;
+    test::addMesh(registry, test::boxMesh(glm::vec3(2.f), true), glm::mat4(1.f), test::grey(0.5f),
+                  false, "room");
+    Material glow = test::grey(0.f);
+    glow.emission = glm::vec3(5.f);
+    test::addMesh(registry,
+                  test::quadMesh({-0.3f, 1.9f, -0.3f}, {0.6f, 0.f, 0.f}, {0.f, 0.f, 0.6f}),
+                  glm::mat4(1.f), glow, false, "panel");
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(2'000));
+    firstUpdate(registry, system);
+    ASSERT_EQ(storeOf(registry).lights.size(), 1u);
+    EXPECT_FALSE(storeOf(registry).lights[0].directDrawn);
+
+    const Entity bulb = test::addPointLight(registry, {0.f, 1.85f, 0.f}, 3.f);
+    registry.emplace<LightStandIn>(bulb);
+    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+    registry.clearChanges();
+    EXPECT_TRUE(deltaOf(registry).full);
+    ASSERT_EQ(storeOf(registry).lights.size(), 1u); // the bulb itself shoots nothing
+    EXPECT_TRUE(storeOf(registry).lights[0].directDrawn);
+
+    system.update(registry, FrameContext{2, 0.0, 0.f, 0}); // nothing changed
+    registry.clearChanges();
+    EXPECT_TRUE(deltaOf(registry).empty());
+
+    registry.patch<WorldTransform>(bulb).matrix = translation({0.f, -1.5f, 0.f});
+    system.update(registry, FrameContext{3, 0.0, 0.f, 0});
+    registry.clearChanges();
+    EXPECT_TRUE(deltaOf(registry).full);
+    EXPECT_FALSE(storeOf(registry).lights[0].directDrawn);
 }
 
 // ---- energy
