@@ -36,6 +36,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <fstream>
 #include <map>
 #include <memory>
@@ -358,6 +359,10 @@ private:
     /// the given component types.
     AccessorData useAccessor(const std::string& usage, int index, int type,
                              std::initializer_list<int> componentTypes) const;
+    /// Accessor `index`'s own buffer view, as stored.
+    AccessorData rawView(int index, std::size_t element) const;
+    /// Writes a sparse accessor's substitutions over its dense elements.
+    void applySparse(int index, std::size_t element, std::vector<unsigned char>& dense) const;
     std::vector<glm::vec3> readVec3(const std::string& usage, int index) const;
     std::vector<glm::vec2> readTexcoords(const std::string& usage, int index) const;
     std::vector<std::uint32_t> readIndices(const std::string& usage, int index,
@@ -402,6 +407,8 @@ private:
     ImageFailure mImageFailure;
     std::vector<std::optional<std::vector<RawPrimitive>>> mRawMeshes; // by mesh index, on use
     std::vector<int> mNodeRecord; ///< per node, its record (traverse); -1: not in the scene
+    /// Sparse accessors and accessors without a buffer view, laid out densely while read.
+    mutable std::deque<std::vector<unsigned char>> mDenseAccessors;
 };
 
 std::vector<unsigned char> GltfReader::readFile() const {
@@ -821,13 +828,75 @@ AccessorData GltfReader::useAccessor(const std::string& usage, int index, int ty
         componentTypes.end())
         fail(field + ".componentType", componentName(a.componentType), " is not allowed for ",
              usage);
-    if (a.sparse.isSparse) fail(field + ".sparse", "sparse accessors are not supported");
-    if (a.bufferView < 0)
-        fail(field + ".bufferView", "missing; accessors without data are not supported");
-    const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(a.bufferView)];
     const std::size_t element = elementBytes(a.componentType, a.type);
+    if (!a.sparse.isSparse && a.bufferView >= 0) {
+        const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(a.bufferView)];
+        return {mModel.buffers[std::size_t(view.buffer)].data.data() + view.byteOffset +
+                    a.byteOffset,
+                view.byteStride != 0 ? view.byteStride : element, a.count, a.componentType};
+    }
+    // Without a buffer view the elements are zeros; a sparse accessor then replaces some of
+    // them (glTF 2.0 section 3.6.2.3). Both are laid out tightly in memory kept for the read.
+    std::vector<unsigned char>& dense = mDenseAccessors.emplace_back(a.count * element, 0);
+    if (a.bufferView >= 0) {
+        const AccessorData base = rawView(index, element);
+        for (std::size_t i = 0; i < a.count; ++i)
+            std::copy_n(base.data + i * base.stride, element, dense.data() + i * element);
+    }
+    if (a.sparse.isSparse) applySparse(index, element, dense);
+    return {dense.data(), element, a.count, a.componentType};
+}
+
+AccessorData GltfReader::rawView(int index, std::size_t element) const {
+    const tinygltf::Accessor& a = mModel.accessors[std::size_t(index)];
+    const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(a.bufferView)];
     return {mModel.buffers[std::size_t(view.buffer)].data.data() + view.byteOffset + a.byteOffset,
             view.byteStride != 0 ? view.byteStride : element, a.count, a.componentType};
+}
+
+void GltfReader::applySparse(int index, std::size_t element,
+                             std::vector<unsigned char>& dense) const {
+    const tinygltf::Accessor& a = mModel.accessors[std::size_t(index)];
+    const std::string field = str("accessors[", index, "].sparse");
+    const auto& sparse = a.sparse;
+    if (sparse.count < 1 || std::size_t(sparse.count) > a.count)
+        fail(field + ".count", sparse.count, " is not in [1, ", a.count, "]");
+    const std::size_t count = std::size_t(sparse.count);
+    // A view holding `count` tightly packed items of `bytes` each from `offset`, or a failure.
+    const auto block = [&](const std::string& where, int viewIndex, int offset,
+                           std::size_t bytes) -> const unsigned char* {
+        checkIndex(where + ".bufferView", viewIndex, mModel.bufferViews.size(), "buffer views");
+        const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(viewIndex)];
+        if (offset < 0 || std::size_t(offset) > view.byteLength ||
+            count > (view.byteLength - std::size_t(offset)) / bytes)
+            fail(where + ".byteOffset", count, " items of ", bytes, " bytes from ", offset,
+                 " do not fit in buffer view ", viewIndex, " (", view.byteLength, " bytes)");
+        return mModel.buffers[std::size_t(view.buffer)].data.data() + view.byteOffset +
+               std::size_t(offset);
+    };
+    const int indexType = sparse.indices.componentType;
+    if (indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        indexType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+        fail(field + ".indices.componentType", componentName(indexType),
+             " is not an unsigned integer type");
+    const std::size_t indexBytes = componentBytes(indexType);
+    const unsigned char* indices =
+        block(field + ".indices", sparse.indices.bufferView, sparse.indices.byteOffset, indexBytes);
+    const unsigned char* values =
+        block(field + ".values", sparse.values.bufferView, sparse.values.byteOffset, element);
+    std::size_t previous = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        const unsigned char* p = indices + i * indexBytes;
+        const std::size_t target = indexBytes == 1   ? p[0]
+                                   : indexBytes == 2 ? load<std::uint16_t>(p)
+                                                     : load<std::uint32_t>(p);
+        if (target >= a.count || (i > 0 && target <= previous))
+            fail(field + ".indices", "element ", i, " is ", target,
+                 ": indices must increase and stay below the count ", a.count);
+        previous = target;
+        std::copy_n(values + i * element, element, dense.data() + target * element);
+    }
 }
 
 std::vector<glm::vec3> GltfReader::readVec3(const std::string& usage, int index) const {

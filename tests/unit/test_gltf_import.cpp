@@ -348,15 +348,19 @@ struct GltfWriter {
     nlohmann::json doc = {{"asset", {{"version", "2.0"}}}};
     std::vector<unsigned char> bytes;
 
-    int floats(const std::vector<float>& values, const char* type) {
+    /// A buffer view over `size` bytes of `data`; returns its index.
+    int view(const void* data, std::size_t size) {
         const std::size_t offset = bytes.size();
-        const auto* p = reinterpret_cast<const unsigned char*>(values.data());
-        bytes.insert(bytes.end(), p, p + values.size() * sizeof(float));
+        const auto* p = static_cast<const unsigned char*>(data);
+        bytes.insert(bytes.end(), p, p + size);
+        doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", size}});
+        return int(doc["bufferViews"].size() - 1);
+    }
+    int floats(const std::vector<float>& values, const char* type) {
         const int components = std::string(type) == "SCALAR" ? 1
                                : std::string(type) == "VEC3" ? 3
                                                              : 4;
-        doc["bufferViews"].push_back(
-            {{"buffer", 0}, {"byteOffset", offset}, {"byteLength", values.size() * 4}});
+        view(values.data(), values.size() * sizeof(float));
         nlohmann::json accessor = {{"bufferView", doc["bufferViews"].size() - 1},
                                    {"componentType", 5126},
                                    {"count", values.size() / std::size_t(components)},
@@ -481,6 +485,50 @@ TEST(GltfImport, ValidButUnusualFilesLoad) {
         EXPECT_LT(r.get<Camera>(cameras.front()).yfov, 3.14f);
         EXPECT_GT(r.get<Camera>(cameras.front()).yfov, 3.13f);
     }
+}
+
+TEST(GltfImport, SparseAccessorsAndAccessorsWithoutDataAreRead) {
+    // A unit quad whose third corner a sparse accessor lifts to z = 1, with texture
+    // coordinates from an accessor that has no buffer view (all zeros, per the spec).
+    GltfWriter w;
+    const int base = w.floats({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0}, "VEC3");
+    const std::vector<std::uint32_t> which{2};
+    const std::vector<float> lifted{1, 1, 1};
+    const int indexView = w.view(which.data(), 4);
+    const int valueView = w.view(lifted.data(), 12);
+    w.doc["accessors"][std::size_t(base)]["sparse"] = {
+        {"count", 1},
+        {"indices", {{"bufferView", indexView}, {"componentType", 5125}}},
+        {"values", {{"bufferView", valueView}}}};
+    w.doc["accessors"][std::size_t(base)]["max"] = {1, 1, 1};
+    w.doc["accessors"].push_back({{"componentType", 5126}, {"count", 4}, {"type", "VEC2"}});
+    const std::vector<std::uint16_t> corners{0, 1, 2, 0, 2, 3};
+    const int indexData = w.view(corners.data(), 12);
+    w.doc["accessors"].push_back(
+        {{"bufferView", indexData}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}});
+    w.doc["meshes"] = {
+        {{"primitives",
+          {{{"attributes", {{"POSITION", base}, {"TEXCOORD_0", 1}}}, {"indices", 2}}}}}};
+    w.doc["nodes"] = {{{"name", "Quad"}, {"mesh", 0}}};
+    w.doc["scenes"] = {{{"nodes", {0}}}};
+    const fs::path path = fs::path(::testing::TempDir()) / "sparse.gltf";
+    w.write(path);
+    Registry registry;
+    importGltf(registry, path, kNoRefinement);
+    const Mesh& mesh = registry.get<Mesh>(entityNamed(registry, "Quad"));
+    // (The lifted corner folds the quad along its diagonal, a crease: the corners on it get a
+    // normal per side, so there are more than four vertices.)
+    int raised = 0, flat = 0;
+    for (const glm::vec3& p : mesh.positions) {
+        raised += p == glm::vec3(1, 1, 1);
+        flat += p == glm::vec3(1, 1, 0);
+    }
+    EXPECT_GE(raised, 1);
+    EXPECT_EQ(flat, 0);
+    ASSERT_EQ(mesh.uvs.size(), mesh.positions.size());
+    for (const glm::vec2& uv : mesh.uvs)
+        EXPECT_EQ(uv, glm::vec2(0.f));
+    fs::remove(path);
 }
 
 TEST(GltfImport, StripsAndFansBecomeTriangleLists) {
