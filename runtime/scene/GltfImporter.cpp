@@ -283,7 +283,26 @@ std::string decodeRgba8(const unsigned char* bytes, std::size_t size, tinygltf::
 struct ImageFailure {
     std::string field;
     std::string what;
+    /// Per image: a material draws it (through a texture's source). An image nothing draws,
+    /// such as one in a format an optional extension adds next to a PNG fallback, may fail to
+    /// decode: it is replaced by one white pixel, with a warning.
+    std::vector<bool> used;
+    std::vector<std::string> skipped;
 };
+
+/// Replaces an undecodable image nothing draws by one white pixel; false if it is drawn.
+bool skipUnusedImage(ImageFailure& context, int index, const std::string& what,
+                     tinygltf::Image& image) {
+    if (index < 0 || (std::size_t(index) < context.used.size() && context.used[std::size_t(index)]))
+        return false;
+    image.width = image.height = 1;
+    image.component = 4;
+    image.bits = 8;
+    image.pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+    image.image.assign(4, 255);
+    context.skipped.push_back(str("images[", index, "]: ", what, "; no material draws it"));
+    return true;
+}
 
 /// tinygltf image callback. Images in buffer views are skipped here and decoded once their
 /// view has been range-checked: tinygltf hands over an unchecked pointer for them.
@@ -292,7 +311,10 @@ bool decodeImageCallback(tinygltf::Image* image, const int index, std::string*, 
     if (image->bufferView >= 0) return true;
     std::string what = decodeRgba8(bytes, std::size_t(size), *image);
     if (what.empty()) return true;
-    *static_cast<ImageFailure*>(user) = {str("images[", index, "]"), std::move(what)};
+    auto& context = *static_cast<ImageFailure*>(user);
+    if (skipUnusedImage(context, index, what, *image)) return true;
+    context.field = str("images[", index, "]");
+    context.what = std::move(what);
     return false;
 }
 
@@ -340,10 +362,12 @@ private:
     std::string_view glbJsonChunk(const std::vector<unsigned char>& bytes) const;
     /// Parses the JSON (syntax errors end here, with line and column), then checks the URIs
     /// of every buffer and image.
-    void checkUris(std::string_view json) const;
+    void checkUris(std::string_view json);
     /// The JSON types of the fields qgi reads (tinygltf quietly puts a default in place of a
     /// value of the wrong type: a string intensity, a float index, a negative offset).
     void checkTypes(const nlohmann::json& document) const;
+    /// Which images a material draws (ImageFailure::used); after checkTypes.
+    void findUsedImages(const nlohmann::json& document);
     void checkUri(const nlohmann::json& object, const std::string& section, std::size_t index,
                   bool isBuffer) const;
     /// The file a relative URI names inside the scene's folder; throws for anything else.
@@ -444,7 +468,7 @@ std::string_view GltfReader::glbJsonChunk(const std::vector<unsigned char>& byte
     return {reinterpret_cast<const char*>(&bytes[kHeaderBytes]), jsonLength};
 }
 
-void GltfReader::checkUris(std::string_view json) const {
+void GltfReader::checkUris(std::string_view json) {
     nlohmann::json document;
     try {
         document = nlohmann::json::parse(json.begin(), json.end());
@@ -457,12 +481,31 @@ void GltfReader::checkUris(std::string_view json) const {
     }
     if (!document.is_object()) fail("JSON", "the top level is not an object");
     checkTypes(document);
+    findUsedImages(document);
     for (const auto& [section, isBuffer] :
          {std::pair{"buffers", true}, std::pair{"images", false}}) {
         const auto it = document.find(section);
         if (it == document.end() || !it->is_array()) continue;
         for (std::size_t i = 0; i < it->size(); ++i)
             checkUri((*it)[i], section, i, isBuffer);
+    }
+}
+
+void GltfReader::findUsedImages(const nlohmann::json& document) {
+    const auto images = document.find("images");
+    mImageFailure.used.assign(images != document.end() ? images->size() : 0, false);
+    const auto textures = document.find("textures");
+    const auto materials = document.find("materials");
+    if (textures == document.end() || materials == document.end()) return;
+    for (const auto& material : *materials) {
+        const auto pbr = material.find("pbrMetallicRoughness");
+        if (pbr == material.end()) continue;
+        const auto texture = pbr->find("baseColorTexture");
+        if (texture == pbr->end() || !texture->contains("index")) continue;
+        const std::size_t t = (*texture)["index"].get<std::size_t>();
+        if (t >= textures->size() || !(*textures)[t].contains("source")) continue;
+        const std::size_t source = (*textures)[t]["source"].get<std::size_t>();
+        if (source < mImageFailure.used.size()) mImageFailure.used[source] = true;
     }
 }
 
@@ -738,6 +781,9 @@ void GltfReader::loadModel(const std::vector<unsigned char>& bytes, std::string_
         error = e.what();
     }
     if (!mImageFailure.field.empty()) fail(mImageFailure.field, mImageFailure.what);
+    for (const std::string& skipped : mImageFailure.skipped)
+        logWarning(mLabel, ": ", skipped);
+    mImageFailure.skipped.clear();
     // tinygltf reports some malformed values (a string where a number belongs, a colour of the
     // wrong length) in `error` and still returns success, with a default in their place.
     if (!ok || !error.empty()) fail("glTF", oneLine(error.empty() ? "load failed" : error));
@@ -808,7 +854,8 @@ TextureLibrary GltfReader::decodeImages() {
             const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(image.bufferView)];
             const auto& data = mModel.buffers[std::size_t(view.buffer)].data;
             const std::string what = decodeRgba8(&data[view.byteOffset], view.byteLength, image);
-            if (!what.empty()) fail(field, what);
+            if (!what.empty() && !skipUnusedImage(mImageFailure, int(i), what, image))
+                fail(field, what);
         }
         if (image.image.empty()) fail(field, "no pixel data");
         library.images.push_back(Image{image.name.empty() ? image.uri : image.name, image.width,

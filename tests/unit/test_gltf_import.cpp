@@ -531,6 +531,26 @@ TEST(GltfImport, SparseAccessorsAndAccessorsWithoutDataAreRead) {
     fs::remove(path);
 }
 
+TEST(GltfImport, AnImageNoMaterialDrawsMayBeUndecodable) {
+    // An optional extension's image (here just bytes that are no PNG) next to what materials
+    // draw: it becomes one white pixel, and the file loads.
+    GltfWriter w;
+    const int triangle = w.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+    w.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", triangle}}}}}}}};
+    w.doc["nodes"] = {{{"name", "Triangle"}, {"mesh", 0}}};
+    w.doc["scenes"] = {{{"nodes", {0}}}};
+    w.doc["images"] = {{{"uri", "data:image/png;base64,UklGRgAAAABXRUJQ"}}}; // WebP bytes
+    const fs::path path = fs::path(::testing::TempDir()) / "unused_image.gltf";
+    w.write(path);
+    Registry registry;
+    importGltf(registry, path, kNoRefinement);
+    const TextureLibrary& library = registry.ctx().get<TextureLibrary>();
+    ASSERT_EQ(library.images.size(), 1u);
+    EXPECT_EQ(library.images[0].width, 1);
+    EXPECT_EQ(library.images[0].rgba, (std::vector<std::uint8_t>{255, 255, 255, 255}));
+    fs::remove(path);
+}
+
 TEST(GltfImport, StripsAndFansBecomeTriangleLists) {
     GltfWriter w;
     // Five vertices along a zigzag make a strip of three triangles, all facing -z; five around
