@@ -110,12 +110,14 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
 
 /// Makes sure an output's folder exists and can be written, before a long run rather than
 /// after it. Throws qgi::Error naming the option.
-void prepareOutput(const std::optional<std::string>& base, const char* option) {
+void prepareOutput(const std::optional<std::string>& base, const char* option,
+                   bool extended = false) {
     if (!base) return;
     namespace fs = std::filesystem;
     if (base->empty()) fail(option, ": the path is empty");
     std::error_code error;
-    if (base->back() == '/' || fs::is_directory(*base, error))
+    // A base path (`extended`) names files BASE.ext: a folder of that name is no obstacle.
+    if (base->back() == '/' || (!extended && fs::is_directory(*base, error)))
         fail(option, ": '", *base, "' is a folder; give a file path");
     const fs::path folder =
         fs::path(*base).has_parent_path() ? fs::path(*base).parent_path() : fs::path(".");
@@ -156,8 +158,8 @@ bool wantVlf(const Registry& registry) {
 
 int runDemo(const DemoOptions& options) {
     if (options.quiet) setLogLevel(LogLevel::Warning);
-    prepareOutput(options.screenshot, "--screenshot");
-    prepareOutput(options.profile, "--profile");
+    prepareOutput(options.screenshot, "--screenshot", true);
+    prepareOutput(options.profile, "--profile", true);
     prepareOutput(options.exportScene, "--export-scene");
     prepareOutput(options.exportIrradiance, "--export-irradiance");
     prepareOutput(options.exportAvatars, "--export-avatars");
@@ -260,6 +262,7 @@ int runDemo(const DemoOptions& options) {
     logInfo("scene '", info.name, "' ready in ", loadSeconds, " s: ", world.aliveCount(),
             " entities, mesh edge bound ", info.maxEdgeLength, " m");
 
+    std::string failures; // outputs that could not be written
     FrameContext context;
     context.seed = options.seed;
     auto last = std::chrono::steady_clock::now();
@@ -287,18 +290,20 @@ int runDemo(const DemoOptions& options) {
         if (screenshot) frame.renderer()->requestScreenshot(*options.screenshot);
         frame.run(world, context);
         window.swapBuffers();
-        // A headless run exists to write its outputs: one that could not be written fails it.
+        // A headless run exists to write its outputs: one that could not be written fails it
+        // (after the others were written, below).
         if (screenshot && options.headless) {
             const auto& outcome = frame.renderer()->lastScreenshot();
             if (!outcome || !outcome->error.empty())
-                fail("--screenshot: ", outcome ? outcome->error : "no frame was rendered");
+                failures +=
+                    str(failures.empty() ? "" : "; ",
+                        "--screenshot: ", outcome ? outcome->error : "no frame was rendered");
         }
         if (options.headless && !options.quiet && (f + 1) % 60 == 0)
             logInfo("frame ", f + 1, "/", options.frames);
     }
 
     // Each output is written even when another fails; the run fails after all were tried.
-    std::string failures;
     const auto write = [&](const char* option, const auto& fn) {
         try {
             fn();

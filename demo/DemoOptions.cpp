@@ -31,10 +31,14 @@ CLI::Validator wholeNumber() {
                 !value.empty() &&
                 value.find_first_not_of("0123456789", value[0] == '-') == std::string::npos &&
                 value != "-";
-            if (digits) { // as written, unless it overflows 64 bits
+            if (digits) { // decimal, unless it overflows 64 bits (CLI11 reads 010 as octal)
                 errno = 0;
                 (void)std::strtoull(value.c_str() + (value[0] == '-'), nullptr, 10);
-                return errno == ERANGE ? "'" + value + "' is too large" : std::string{};
+                if (errno == ERANGE) return "'" + value + "' is too large";
+                const std::size_t sign = value[0] == '-' ? 1 : 0;
+                const std::size_t first = value.find_first_not_of('0', sign);
+                value.erase(sign, (first == std::string::npos ? value.size() - 1 : first) - sign);
+                return {};
             }
             char* end = nullptr;
             const double v = std::strtod(value.c_str(), &end);

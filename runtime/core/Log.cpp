@@ -29,15 +29,23 @@ LogLevel logLevel() { return gLevel.load(std::memory_order_relaxed); }
 std::string printable(std::string_view text) {
     std::string out;
     out.reserve(text.size());
-    for (const char ch : text) {
-        const auto byte = static_cast<unsigned char>(ch);
+    static constexpr char kHex[] = "0123456789abcdef";
+    const auto escape = [&](unsigned char byte) {
+        out += "\\x";
+        out += kHex[byte >> 4];
+        out += kHex[byte & 15];
+    };
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        const auto byte = static_cast<unsigned char>(text[i]);
+        const auto next = i + 1 < text.size() ? static_cast<unsigned char>(text[i + 1]) : 0;
         if (byte < 0x20 || byte == 0x7f) {
-            static constexpr char kHex[] = "0123456789abcdef";
-            out += "\\x";
-            out += kHex[byte >> 4];
-            out += kHex[byte & 15];
+            escape(byte);
+        } else if (byte == 0xc2 && next >= 0x80 && next <= 0x9f) { // C1 controls in UTF-8
+            escape(byte);
+            escape(next);
+            ++i;
         } else {
-            out += ch;
+            out += text[i];
         }
     }
     return out;

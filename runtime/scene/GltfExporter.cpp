@@ -116,6 +116,9 @@ void addPathAnimation(tinygltf::Model& model, std::vector<unsigned char>& buffer
     std::vector<glm::vec3> positions;
     std::vector<glm::vec4> rotations; // x, y, z, w as glTF stores them
     for (const PathKey& k : path.keys) {
+        // glTF key times strictly increase: a key at the time of the one before (a jump, to
+        // PathFollower) keeps only the first.
+        if (!times.empty() && !(k.time > times.back())) continue;
         times.push_back(k.time);
         positions.push_back(k.position);
         rotations.push_back({k.rotation.x, k.rotation.y, k.rotation.z, k.rotation.w});

@@ -858,6 +858,9 @@ TextureLibrary GltfReader::decodeImages() {
                 fail(field, what);
         }
         if (image.image.empty()) fail(field, "no pixel data");
+        for (const std::string& skipped : mImageFailure.skipped)
+            logWarning(mLabel, ": ", skipped);
+        mImageFailure.skipped.clear();
         library.images.push_back(Image{image.name.empty() ? image.uri : image.name, image.width,
                                        image.height, std::move(image.image), true});
     }
@@ -884,6 +887,9 @@ AccessorData GltfReader::useAccessor(const std::string& usage, int index, int ty
     }
     // Without a buffer view the elements are zeros; a sparse accessor then replaces some of
     // them (glTF 2.0 section 3.6.2.3). Both are laid out tightly in memory kept for the read.
+    if (a.count > kGltfMaxFileBytes / element)
+        fail(field + ".count", a.count, " elements of ", element,
+             " bytes would take more than a file may hold (", kGltfMaxFileBytes, " bytes)");
     std::vector<unsigned char>& dense = mDenseAccessors.emplace_back(a.count * element, 0);
     if (a.bufferView >= 0) {
         const AccessorData base = rawView(index, element);
@@ -1171,8 +1177,10 @@ std::optional<Camera> GltfReader::readCamera(int index) const {
     Camera camera;
     camera.yfov = float(std::clamp(p.yfov, 1e-3, std::numbers::pi - 2e-3));
     camera.znear = float(std::max(p.znear, 1e-6));
-    if (p.zfar != 0.0) // 0: absent, an infinite projection; the component's default stands in
+    if (p.zfar != 0.0)
         camera.zfar = std::max(float(p.zfar), 1.001f * camera.znear);
+    else if (camera.zfar < 1.001f * camera.znear) // absent (infinite): the component's
+        camera.zfar = 1e4f * camera.znear;        // default, unless znear is beyond it
     if (camera.yfov != float(p.yfov) || camera.znear != float(p.znear) ||
         (p.zfar != 0.0 && camera.zfar != float(p.zfar)))
         logWarning(mLabel, ": ", field, ".perspective: adjusted to yfov ", camera.yfov, ", znear ",

@@ -149,8 +149,8 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         ctx.contains<PhotonDelta>() ? ctx.get<PhotonDelta>() : ctx.emplace<PhotonDelta>();
     PhotonPathGrid& grid =
         ctx.contains<PhotonPathGrid>() ? ctx.get<PhotonPathGrid>() : ctx.emplace<PhotonPathGrid>();
-    delta.clear();
-    delta.sequence = ++mDeltaSequence;
+    delta.clear(); // keeps the sequence number, which this update advances
+    ++delta.sequence;
     mStats = {};
 
     mSources.clear();
@@ -230,8 +230,10 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
         edited.firstPhoton = shot.firstPhoton;
         edited.photonCount = shot.photonCount;
         prepareEmitter(registry, mSceneBox, edited);
-        // A light turning on or off changes how photons are shared: shoot everything anew.
-        if (shines(edited.power) != shines(shot.power)) return true;
+        // A light turning on or off changes how photons are shared, and a surface moving to or
+        // from a stand-in changes what hybrid mode counts: shoot everything anew.
+        if (shines(edited.power) != shines(shot.power) || edited.directDrawn != shot.directDrawn)
+            return true;
         shot = std::move(edited);
         mSweeps[i].remaining = shot.photonCount;
         store.lights[i].power = shot.power;
@@ -249,21 +251,19 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
 bool PhotonUpdateSystem::sharesDrifted() const {
     // Photons carry equal power only as shot: a light that has since brightened carries more per
     // photon than the rest (noisier, not biased), and one that lit up from next to nothing may
-    // have no photons at all (its light would be missing). Past kShareDrift of the mean power
-    // per photon, share them anew.
+    // have no photons at all (its light would be missing). Each light's count is compared with
+    // its exact share of the photons now; a share under one photon is no share to keep.
     double total = 0.0, photons = 0.0;
     for (const PhotonEmitter& e : mEmitters) {
         total += double(e.power.x) + e.power.y + e.power.z;
         photons += e.photonCount;
     }
     if (!(total > 0.0) || !(photons > 0.0)) return false;
-    const double mean = total / photons;
     for (const PhotonEmitter& e : mEmitters) {
-        const double power = double(e.power.x) + e.power.y + e.power.z;
-        if (power <= 0.0) continue;
-        if (e.photonCount == 0) return true;
-        const double perPhoton = power / e.photonCount;
-        if (perPhoton > kShareDrift * mean || perPhoton * kShareDrift < mean) return true;
+        const double share = photons * (double(e.power.x) + e.power.y + e.power.z) / total;
+        if (share < 1.0) continue;
+        const double count = e.photonCount;
+        if (count * kShareDrift < share || count > kShareDrift * share) return true;
     }
     return false;
 }

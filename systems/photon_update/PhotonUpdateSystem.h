@@ -28,8 +28,9 @@ class PhotonPathGrid;
  *  with seed 004's emission, frame-coherent seeding and progressive refinement).
  *
  *  Full shot (first frame; a light turned on or off, added or removed; a light whose power
- *  drifted since the last full shot until it has no photons, or carries 4x more or less power
- *  per photon than the mean; a surface's albedo edited; every frame with fullRecompute):
+ *  drifted since the last full shot until its photon count is 4x above or below its share of
+ *  the photons (a share of one photon or more); an emissive surface gaining or losing its
+ *  light stand-in; a surface's albedo edited; every frame with fullRecompute):
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built; PhotonDelta::full.
  *
@@ -138,10 +139,9 @@ private:
     /// their sweeps. True when the set of shining lights changed, or the lights' powers drifted
     /// from their photon shares (sharesDrifted): a full shot is due.
     bool detectLightChanges(const Registry& registry, PhotonStore& store);
-    /// Whether a shining light has no photons, or power per photon more than kShareDrift times
-    /// above or below the mean.
+    /// Whether a light's photon count is more than kShareDrift times above or below its exact
+    /// share of the photons at the lights' present powers (shares under one photon aside).
     bool sharesDrifted() const;
-    std::uint64_t mDeltaSequence = 0; ///< PhotonDelta::sequence of the last update
     std::uint64_t mStandIns = 0;      ///< standInSignature at the last check
     bool albedoChanged(const Registry& registry) const;
     void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,

@@ -43,7 +43,7 @@ VlfScene::Material VlfScene::fromComponent(const qgi::Material& m) {
     vm.specular = m.specular;
     vm.phongExponent = m.phongExponent;
     const bool explicitSpecular = m.specular != glm::vec3(0.f);
-    // A rough metal (roughness >= kDiffuseRoughness: a lobe of n_s below about 4, glTF's default
+    // A rough metal (roughness >= kDiffuseRoughness: a lobe of n_s about 4 or less, glTF's default
     // roughness 1 among them) scatters nearly as widely as a diffuse surface: it stays diffuse
     // with albedo baseColor, rather than costing a directional field it would blur anyway.
     if (!explicitSpecular && m.metallic > 0.f && std::isfinite(m.metallic) &&

@@ -80,7 +80,8 @@ public:
         glm::vec3 diffuse{0.f}, emission{0.f}, specular{0.f};
         float phongExponent = 0.f;
     };
-    /// Roughness from which a metal counts as diffuse (n_s = 2 / roughness^4 - 2 below 4).
+    /// Roughness from which a metal counts as diffuse (n_s = 2 / roughness^4 - 2 of about 4 or
+    /// less).
     static constexpr float kDiffuseRoughness = 0.75f;
     /// The VLF's reading of a Material component: `specular` and `phongExponent` when set;
     /// otherwise glTF metallic-roughness mapped to k_s = metallic, k_d = baseColor *

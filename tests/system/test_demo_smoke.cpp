@@ -120,6 +120,18 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
 TEST(DemoSmoke, WholeNumbersMayBeWrittenInScientificForm) {
     // "--photons 1e6" is a million; the run then stops at --help.
     EXPECT_EQ(runDemo("--photons 1e6 --frames 1e1 --help").exitCode, 0);
+    // Leading zeros are decimal (CLI11 alone would read 010 as octal 8): ten frames profiled.
+    const std::string base = (scratchDir() / "ten").string();
+    ASSERT_EQ(runDemo("--scene cornell --headless --frames 010 --width 16 --height 16 "
+                      "--photons 0 --vlf off --profile " +
+                      base)
+                  .exitCode,
+              0);
+    std::ifstream csv(base + ".csv");
+    std::size_t lines = 0;
+    for (std::string line; std::getline(csv, line);)
+        ++lines;
+    EXPECT_EQ(lines, 11u); // a header and ten frames
 }
 
 TEST(DemoSmoke, OutputThatCannotBeWrittenFailsBeforeTheRun) {
@@ -136,8 +148,23 @@ TEST(DemoSmoke, OutputThatCannotBeWrittenFailsBeforeTheRun) {
     }
 }
 
+TEST(DemoSmoke, AFailedScreenshotStillLeavesTheOtherOutputs) {
+    // shot.png is a folder: the screenshot fails when written, after the checks at start.
+    const fs::path dir = scratchDir() / "late_failure";
+    fs::remove_all(dir);
+    fs::create_directories(dir / "shot.png");
+    const RunResult run =
+        runDemo("--scene cornell --headless --frames 2 --width 32 --height 32 "
+                "--photons 1000 --screenshot " +
+                (dir / "shot").string() + " --export-irradiance " + (dir / "light.ply").string());
+    EXPECT_EQ(run.exitCode, 1) << run.output;
+    EXPECT_NE(run.output.find("--screenshot"), std::string::npos) << run.output;
+    EXPECT_TRUE(fs::exists(dir / "light.ply")) << run.output;
+}
+
 TEST(DemoSmoke, OutputPathsThatNameNoFileAreRefused) {
-    for (const char* args : {"--screenshot ''", "--profile /tmp/", "--export-irradiance /tmp"}) {
+    for (const char* args : {"--screenshot ''", "--profile /tmp/", "--export-irradiance /tmp",
+                             "--export-avatars /tmp"}) {
         const RunResult run = runDemo(std::string("--headless --frames 1 ") + args);
         EXPECT_EQ(run.exitCode, 1) << args << ": " << run.output;
         EXPECT_EQ(run.output.find("ready in"), std::string::npos) << args;

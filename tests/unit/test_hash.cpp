@@ -79,6 +79,10 @@ TEST(Log, PrintableEscapesControlCharacters) {
     EXPECT_EQ(printable("ok \x1b]0;owned\x07\x1b[2J\rqgi: fake\n"),
               "ok \\x1b]0;owned\\x07\\x1b[2J\\x0dqgi: fake\\x0a");
     EXPECT_EQ(printable("caf\xc3\xa9 \x7f"), "caf\xc3\xa9 \\x7f"); // UTF-8 passes, DEL does not
+    EXPECT_EQ(printable("\xc2\x9b"
+                        "31m"),
+              "\\xc2\\x9b"
+              "31m"); // UTF-8 CSI (a C1 control)
     EXPECT_EQ(printable(""), "");
 }
 
