@@ -318,16 +318,17 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         mSources.resize(kMaxLights);
     }
     for (std::size_t i = 0; i < mSources.size(); ++i) {
-        if (i < mEmitters.size() && mSources[i].sameSource(mEmitters[i]))
+        if (i < mEmitters.size() && mSources[i].sameSource(mEmitters[i])) {
             mSources[i] = std::move(mEmitters[i]);
-        else
+            // A kept surface may have gained or lost its stand-in since it was prepared.
+            if (mSources[i].kind == EmitterKind::Surface)
+                mSources[i].directDrawn = hasLightStandIn(registry, mSources[i].entity);
+        } else {
             prepareEmitter(registry, mSceneBox, mSources[i]);
+        }
     }
     std::swap(mEmitters, mSources);
     allocatePhotons(mEmitters, mSettings.photonCount);
-    // Kept surfaces may have gained or lost their stand-in since they were prepared.
-    for (PhotonEmitter& e : mEmitters)
-        if (e.kind == EmitterKind::Surface) e.directDrawn = hasLightStandIn(registry, e.entity);
     mStandIns = standInSignature(registry);
     mSweeps.assign(mEmitters.size(), Sweep{});
 
