@@ -73,6 +73,14 @@ void appendPath(PhotonStore& store, std::span<const Segment> path, std::uint16_t
         push(store.segments, seg);
 }
 
+/// The floor most tests light: [0, 1] x [0, 1] at y = 0, facing up, in `quads` x `quads` quads
+/// (vertex (i, j) at z = i / quads, x = j / quads), static, named "floor".
+Entity addUnitFloor(Registry& registry, int quads) {
+    return addReceiverMesh(registry,
+                           gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, quads),
+                           kIdentity, false, "floor");
+}
+
 const VertexIrradiance& irradiance(const Registry& registry, Entity e) {
     return registry.get<VertexIrradiance>(e);
 }
@@ -186,9 +194,7 @@ TEST(Detp, UniformBeamErrorFallsAsOneOverSqrtN) {
     constexpr double kRadius = 0.04;
     Registry registry;
     addDetpResources(registry);
-    const Entity floor =
-        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
-                        kIdentity, false, "floor");
+    const Entity floor = addUnitFloor(registry, 10);
     DetpSettings settings;
     settings.discRadius = float(kRadius);
     DetpIrradianceSystem system(settings);
@@ -231,9 +237,7 @@ TEST(Detp, ImpactCountUnderAUniformBeamHasItsBinomialError) {
     // error exceeds.
     Registry registry;
     addDetpResources(registry);
-    const Entity floor =
-        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 10),
-                        kIdentity, false, "floor");
+    const Entity floor = addUnitFloor(registry, 10);
     DetpSettings settings;
     settings.estimator = IrradianceEstimator::ImpactCount;
     settings.discRadius = 0.04f; // unused by impact count; spares a SceneInfo
@@ -347,9 +351,7 @@ struct IncrementalWorld {
 
     IncrementalWorld() {
         addDetpResources(registry);
-        floor = addReceiverMesh(registry,
-                                gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
-                                kIdentity, false, "floor");
+        floor = addUnitFloor(registry, 20);
         wall = addReceiverMesh(registry,
                                gridMesh({0.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}, 20),
                                kIdentity, false, "wall");
@@ -585,9 +587,7 @@ TEST(Detp, DriftPolicySchedulesAFullReestimate) {
     // incremental frame reaches it, so the 26th after a full one is full.
     Registry registry;
     addDetpResources(registry);
-    const Entity floor =
-        addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 20),
-                        kIdentity, false, "floor");
+    const Entity floor = addUnitFloor(registry, 20);
     const glm::vec3 centre(0.5f, 0.f, 0.5f);
     const auto landing = [&](float height) {
         return Segment{centre + glm::vec3(0.f, height, 0.f),
@@ -798,8 +798,7 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
 
     Registry registry;
     addDetpResources(registry);
-    addReceiverMesh(registry, gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 2),
-                    kIdentity, false, "floor");
+    addUnitFloor(registry, 2);
     DetpIrradianceSystem system(DetpSettings{});
     EXPECT_THROW(system.build(registry), Error); // radius 0 and no SceneInfo
     registry.ctx().emplace<SceneInfo>().maxEdgeLength = 0.35f;
