@@ -279,8 +279,9 @@ std::string decodeRgba8(const unsigned char* bytes, std::size_t size, tinygltf::
     return {};
 }
 
-/// Where the image callback reports a failure (tinygltf would only keep a string).
-struct ImageFailure {
+/// What the image callback knows and reports: which images are drawn, a failure (tinygltf
+/// would only keep a string), the images replaced for want of a decoder.
+struct ImageDecoding {
     std::string field;
     std::string what;
     /// Per image: a material draws it (through a texture's source). An image nothing draws,
@@ -291,7 +292,7 @@ struct ImageFailure {
 };
 
 /// Replaces an undecodable image nothing draws by one white pixel; false if it is drawn.
-bool skipUnusedImage(ImageFailure& context, int index, const std::string& what,
+bool skipUnusedImage(ImageDecoding& context, int index, const std::string& what,
                      tinygltf::Image& image) {
     if (index < 0 || (std::size_t(index) < context.used.size() && context.used[std::size_t(index)]))
         return false;
@@ -311,7 +312,7 @@ bool decodeImageCallback(tinygltf::Image* image, const int index, std::string*, 
     if (image->bufferView >= 0) return true;
     std::string what = decodeRgba8(bytes, std::size_t(size), *image);
     if (what.empty()) return true;
-    auto& context = *static_cast<ImageFailure*>(user);
+    auto& context = *static_cast<ImageDecoding*>(user);
     if (skipUnusedImage(context, index, what, *image)) return true;
     context.field = str("images[", index, "]");
     context.what = std::move(what);
@@ -366,8 +367,10 @@ private:
     /// The JSON types of the fields qgi reads (tinygltf quietly puts a default in place of a
     /// value of the wrong type: a string intensity, a float index, a negative offset).
     void checkTypes(const nlohmann::json& document) const;
-    /// Which images a material draws (ImageFailure::used); after checkTypes.
+    /// Which images a material draws (ImageDecoding::used); after checkTypes.
     void findUsedImages(const nlohmann::json& document);
+    /// Warns about the images replaced by skipUnusedImage since the last call.
+    void reportSkippedImages();
     void checkUri(const nlohmann::json& object, const std::string& section, std::size_t index,
                   bool isBuffer) const;
     /// The file a relative URI names inside the scene's folder; throws for anything else.
@@ -428,7 +431,7 @@ private:
     std::string mLabel;
     SceneOptions mOptions;
     tinygltf::Model mModel;
-    ImageFailure mImageFailure;
+    ImageDecoding mImages;
     std::vector<std::optional<std::vector<RawPrimitive>>> mRawMeshes; // by mesh index, on use
     std::vector<int> mNodeRecord; ///< per node, its record (traverse); -1: not in the scene
     /// Sparse accessors and accessors without a buffer view, laid out densely while read.
@@ -491,9 +494,15 @@ void GltfReader::checkUris(std::string_view json) {
     }
 }
 
+void GltfReader::reportSkippedImages() {
+    for (const std::string& skipped : mImages.skipped)
+        logWarning(mLabel, ": ", skipped);
+    mImages.skipped.clear();
+}
+
 void GltfReader::findUsedImages(const nlohmann::json& document) {
     const auto images = document.find("images");
-    mImageFailure.used.assign(images != document.end() ? images->size() : 0, false);
+    mImages.used.assign(images != document.end() ? images->size() : 0, false);
     const auto textures = document.find("textures");
     const auto materials = document.find("materials");
     if (textures == document.end() || materials == document.end()) return;
@@ -505,7 +514,7 @@ void GltfReader::findUsedImages(const nlohmann::json& document) {
         const std::size_t t = (*texture)["index"].get<std::size_t>();
         if (t >= textures->size() || !(*textures)[t].contains("source")) continue;
         const std::size_t source = (*textures)[t]["source"].get<std::size_t>();
-        if (source < mImageFailure.used.size()) mImageFailure.used[source] = true;
+        if (source < mImages.used.size()) mImages.used[source] = true;
     }
 }
 
@@ -768,7 +777,7 @@ fs::path GltfReader::resolveUri(const std::string& field, const std::string& uri
 void GltfReader::loadModel(const std::vector<unsigned char>& bytes, std::string_view json,
                            bool glb) {
     tinygltf::TinyGLTF loader;
-    loader.SetImageLoader(&decodeImageCallback, &mImageFailure);
+    loader.SetImageLoader(&decodeImageCallback, &mImages);
     std::string error, warning;
     bool ok = false;
     try {
@@ -780,10 +789,8 @@ void GltfReader::loadModel(const std::vector<unsigned char>& bytes, std::string_
     } catch (const std::exception& e) { // tinygltf indexes with .at() on some bad input
         error = e.what();
     }
-    if (!mImageFailure.field.empty()) fail(mImageFailure.field, mImageFailure.what);
-    for (const std::string& skipped : mImageFailure.skipped)
-        logWarning(mLabel, ": ", skipped);
-    mImageFailure.skipped.clear();
+    if (!mImages.field.empty()) fail(mImages.field, mImages.what);
+    reportSkippedImages();
     // tinygltf reports some malformed values (a string where a number belongs, a colour of the
     // wrong length) in `error` and still returns success, with a default in their place.
     if (!ok || !error.empty()) fail("glTF", oneLine(error.empty() ? "load failed" : error));
@@ -854,13 +861,10 @@ TextureLibrary GltfReader::decodeImages() {
             const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(image.bufferView)];
             const auto& data = mModel.buffers[std::size_t(view.buffer)].data;
             const std::string what = decodeRgba8(&data[view.byteOffset], view.byteLength, image);
-            if (!what.empty() && !skipUnusedImage(mImageFailure, int(i), what, image))
-                fail(field, what);
+            if (!what.empty() && !skipUnusedImage(mImages, int(i), what, image)) fail(field, what);
         }
         if (image.image.empty()) fail(field, "no pixel data");
-        for (const std::string& skipped : mImageFailure.skipped)
-            logWarning(mLabel, ": ", skipped);
-        mImageFailure.skipped.clear();
+        reportSkippedImages();
         library.images.push_back(Image{image.name.empty() ? image.uri : image.name, image.width,
                                        image.height, std::move(image.image), true});
     }
