@@ -107,6 +107,15 @@ int addMesh(tinygltf::Model& model, std::vector<unsigned char>& buffer, const Me
     return int(model.meshes.size() - 1);
 }
 
+/// Sets extras[key] = value on a node, keeping its other extras.
+void addExtra(tinygltf::Node& node, const std::string& key, tinygltf::Value value) {
+    tinygltf::Value::Object extras = node.extras.IsObject()
+                                         ? node.extras.Get<tinygltf::Value::Object>()
+                                         : tinygltf::Value::Object{};
+    extras[key] = std::move(value);
+    node.extras = tinygltf::Value(std::move(extras));
+}
+
 /// A scripted path as glTF animation channels on `node` (LINEAR translation and rotation over
 /// the path's key times), in the file's one animation. What glTF cannot say, the loop and the
 /// time offset, goes to the node's extras as {"qgiPath": {"loop": bool, "timeOffset": s}}.
@@ -145,13 +154,10 @@ void addPathAnimation(tinygltf::Model& model, std::vector<unsigned char>& buffer
                                        TINYGLTF_TYPE_VEC3, 0));
     channel("rotation", addAccessor(model, buffer, rotations, TINYGLTF_COMPONENT_TYPE_FLOAT,
                                     TINYGLTF_TYPE_VEC4, 0));
-    tinygltf::Node& n = model.nodes[std::size_t(node)];
-    tinygltf::Value::Object extras =
-        n.extras.IsObject() ? n.extras.Get<tinygltf::Value::Object>() : tinygltf::Value::Object{};
-    extras["qgiPath"] = tinygltf::Value(
-        tinygltf::Value::Object{{"loop", tinygltf::Value(path.loop)},
-                                {"timeOffset", tinygltf::Value(double(path.timeOffset))}});
-    n.extras = tinygltf::Value(std::move(extras));
+    addExtra(model.nodes[std::size_t(node)], "qgiPath",
+             tinygltf::Value(tinygltf::Value::Object{
+                 {"loop", tinygltf::Value(path.loop)},
+                 {"timeOffset", tinygltf::Value(double(path.timeOffset))}}));
 }
 
 tinygltf::Material toGltf(const Material& m) {
@@ -245,13 +251,8 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
         if (lights.size() > 1)
             logWarning(label, ": node '", node.name, "' has ", lights.size(),
                        " lights; glTF allows one per node, only the first is written");
-        if (!lights.empty() && registry.has<LightStandIn>(e)) {
-            tinygltf::Value::Object extras =
-                node.extras.IsObject() ? node.extras.Get<tinygltf::Value::Object>()
-                                       : tinygltf::Value::Object{};
-            extras["standIn"] = tinygltf::Value(true);
-            node.extras = tinygltf::Value(std::move(extras));
-        }
+        if (!lights.empty() && registry.has<LightStandIn>(e))
+            addExtra(node, "standIn", tinygltf::Value(true));
         if (!lights.empty()) {
             node.extensions[kLightsExtension] = tinygltf::Value(
                 tinygltf::Value::Object{{"light", tinygltf::Value(int(model.lights.size()))}});
