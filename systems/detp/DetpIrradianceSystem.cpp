@@ -82,9 +82,15 @@ void DetpIrradianceSystem::build(Registry& registry) {
     mIsMoved.assign(mReceivers.receivers().size(), 0);
     mBuilt = true;
     mNeedsFull = true;
+    std::size_t mobiles = 0, convex = 0;
+    for (const auto& receiver : mReceivers.receivers()) {
+        mobiles += receiver.mobile ? 1 : 0;
+        convex += receiver.convex ? 1 : 0;
+    }
     logInfo("DETP: ", irradianceEstimatorName(mSettings.estimator), " over ", vertices,
-            " vertices (", staticCount, " static) in ", mReceivers.receivers().size(),
-            " meshes, disc radius ", mRadius, " m", mSettings.hybrid ? ", hybrid" : "");
+            " vertices (", staticCount, " static) in ", mReceivers.receivers().size(), " meshes (",
+            mobiles, " mobile, ", convex, " of them convex), disc radius ", mRadius, " m",
+            mSettings.hybrid ? ", hybrid" : "");
 }
 
 void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
@@ -169,6 +175,11 @@ void DetpIrradianceSystem::listCountedSegments(const PhotonStore& store,
 
 // ---- DETP ---------------------------------------------------------------------------------
 
+Entity DetpIrradianceSystem::leavingSkippedFrom(std::uint32_t receiver) const {
+    const auto& r = mReceivers.receivers()[receiver];
+    return r.mobile && r.convex ? r.entity : Entity{};
+}
+
 void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
                                            const PhotonSegments& segments,
                                            std::span<const std::uint32_t> indices,
@@ -220,6 +231,9 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
     }
     const float tail = crossingTail();
     const PhotonSegments& segments = store.segments;
+    mLeavesFrom.clear();
+    for (const std::uint32_t r : mobiles)
+        mLeavesFrom.push_back(leavingSkippedFrom(r));
     // One query and one walk for all of them: a path near several mobiles is read once.
     std::span<const std::uint32_t> candidates;
     if (const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>()) {
@@ -246,8 +260,10 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
             const PhotonPath& path = store.paths[candidates[i]];
             for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k) {
                 const std::uint32_t s = path.first + k;
+                const Entity from = k > 0 ? segments.hitEntity[s - 1] : Entity{};
                 for (std::size_t j = 0; j < count; ++j)
-                    if (segmentMeetsBox(segments.origin[s], segments.direction[s],
+                    if (!(from == mLeavesFrom[j] && !from.isNull()) &&
+                        segmentMeetsBox(segments.origin[s], segments.direction[s],
                                         segments.length[s] + tail, mMobileBoxes[j]))
                         lists[j].push_back(s);
             }
@@ -282,41 +298,47 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
     for (DeltaPart* part : {&subtract, &add}) {
         part->indices.clear();
         part->beyond.clear();
+        part->from.clear();
     }
     const PhotonSegments& before = delta.oldSegments;
     const PhotonSegments& after = delta.newSegments;
     for (std::size_t i = 0; i < delta.paths.size(); ++i) {
         std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
         const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
+        // Where each suffix starts: the hit of the kept prefix's last segment (segment k of a
+        // stored path has bounce k), and within a suffix the hit of the segment before.
+        const PhotonPath& path = store.paths[delta.paths[i]];
+        const std::uint32_t head = o < oldEnd ? before.bounce[o] : n < newEnd ? after.bounce[n] : 0;
+        const Entity prefixEnd = head > 0 && head <= path.count
+                                     ? store.segments.hitEntity[path.first + head - 1]
+                                     : Entity{};
+        const auto list = [&](DeltaPart& part, std::uint32_t first, std::uint32_t s, float beyond) {
+            part.indices.push_back(s);
+            part.beyond.push_back(beyond);
+            part.from.push_back(s == first ? prefixEnd : part.segments->hitEntity[s - 1]);
+        };
+        const std::uint32_t oldFirst = o, newFirst = n;
         // Not counted (hybrid mode, first segment of a light the renderer draws): skipped on
         // both sides.
-        const std::uint16_t light = store.paths[delta.paths[i]].light;
-        if (o < oldEnd && !counted(before, o, light)) ++o;
-        if (n < newEnd && !counted(after, n, light)) ++n;
+        if (o < oldEnd && !counted(before, o, path.light)) ++o;
+        if (n < newEnd && !counted(after, n, path.light)) ++n;
         // The two heads are one ray stopped at different lengths: the crossings of the shorter
         // one are also the longer one's and cancel exactly, so only the longer one's crossings
         // beyond the shorter one's end are applied.
         if (o < oldEnd && n < newEnd && before.origin[o] == after.origin[n] &&
             before.direction[o] == after.direction[n] && before.power[o] == after.power[n] &&
             before.bounce[o] == after.bounce[n]) {
-            if (after.length[n] < before.length[o]) {
-                subtract.indices.push_back(o);
-                subtract.beyond.push_back(after.length[n]);
-            } else if (before.length[o] < after.length[n]) {
-                add.indices.push_back(n);
-                add.beyond.push_back(before.length[o]);
-            }
+            if (after.length[n] < before.length[o])
+                list(subtract, oldFirst, o, after.length[n]);
+            else if (before.length[o] < after.length[n])
+                list(add, newFirst, n, before.length[o]);
             ++o;
             ++n;
         }
-        for (; o < oldEnd; ++o) {
-            subtract.indices.push_back(o);
-            subtract.beyond.push_back(kWhole);
-        }
-        for (; n < newEnd; ++n) {
-            add.indices.push_back(n);
-            add.beyond.push_back(kWhole);
-        }
+        for (; o < oldEnd; ++o)
+            list(subtract, oldFirst, o, kWhole);
+        for (; n < newEnd; ++n)
+            list(add, newFirst, n, kWhole);
     }
 }
 
@@ -353,12 +375,14 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         for (std::uint32_t r = 0; r < receivers.size(); ++r) {
             if (!receivers[r].mobile || mIsMoved[r]) continue;
             const Aabb box = discBounds(r);
+            const Entity skipped = leavingSkippedFrom(r);
             for (const DeltaPart& part : mDeltaParts) {
                 mSegmentList.clear();
                 mBeyondList.clear();
                 for (std::size_t k = 0; k < part.indices.size(); ++k) {
                     const std::uint32_t i = part.indices[k];
-                    if (!segmentMeetsBox(part.segments->origin[i], part.segments->direction[i],
+                    if ((part.from[k] == skipped && !skipped.isNull()) ||
+                        !segmentMeetsBox(part.segments->origin[i], part.segments->direction[i],
                                          part.segments->length[i] + tail, box))
                         continue;
                     mSegmentList.push_back(part.indices[k]);

@@ -40,6 +40,9 @@ struct PhotonSegments;
  *     PhotonDelta::movedMobiles) are re-estimated in full at the new pose from the segments of
  *     the paths the PhotonPathGrid finds near the mobile, so the whole ray set is never
  *     scanned. Without a PhotonPathGrid resource every stored path is a candidate.
+ *  A segment that starts on a convex mobile (ReceiverSet::Receiver::convex) is not traced
+ *  through that mobile's discs, in full estimates and deltas alike: it cannot cross one from the
+ *  front, save at t = 0 leaving across an edge, which is light leaving the surface.
  *  Sums are kept per vertex in double precision and applied in a fixed order (DiscIndex), so
  *  the same frames give bit-identical irradiance on any thread count.
  *
@@ -108,6 +111,10 @@ public:
 private:
     void collectMovedMobiles(const Registry& registry, const PhotonDelta& delta);
     Aabb discBounds(std::uint32_t receiver) const;
+    /// The entity whose leaving segments the receiver's discs skip: itself when it is a convex
+    /// mobile (ReceiverSet::Receiver::convex: they cannot cross its discs from the front), else
+    /// null.
+    Entity leavingSkippedFrom(std::uint32_t receiver) const;
     float crossingTail() const;
 
     void updateDetp(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
@@ -159,10 +166,11 @@ private:
         double sign = 1.0;
         std::vector<std::uint32_t> indices;
         std::vector<float> beyond;
+        std::vector<Entity> from; ///< per listed segment: what its origin lies on (or null)
     };
 
     // Frame scratch, kept so the frame path does not allocate once warm.
-    DeltaPart mDeltaParts[2] = {{nullptr, -1.0, {}, {}}, {nullptr, 1.0, {}, {}}};
+    DeltaPart mDeltaParts[2] = {{nullptr, -1.0, {}, {}, {}}, {nullptr, 1.0, {}, {}, {}}};
     std::vector<float> mBeyondList;
     std::vector<std::uint32_t> mMoved;  ///< receiver indices of mobiles that moved
     std::vector<std::uint8_t> mIsMoved; ///< per receiver
@@ -172,6 +180,7 @@ private:
     std::vector<std::uint32_t> mAllPaths; ///< 0, 1, ...: the candidates without a path grid
     std::vector<std::vector<std::uint32_t>> mChunkLists; ///< per task and mobile, estimateMobiles
     std::vector<Aabb> mMobileBoxes;                      ///< estimateMobiles: per mobile
+    std::vector<Entity> mLeavesFrom;                     ///< estimateMobiles: per mobile
     std::vector<std::uint32_t> mAllMobiles;              ///< receiver indices, full estimates
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;

@@ -72,6 +72,24 @@ const Mesh& checkedMesh(const Registry& registry, Entity e, bool mobile) {
     return *mesh;
 }
 
+/// Whether every tangent plane (position, normal) has every position behind it, within
+/// ReceiverSet::kConvexTolerance of the positions' bounding diagonal.
+bool tangentPlanesSupport(std::span<const glm::vec3> positions,
+                          std::span<const glm::vec3> normals) {
+    if (positions.empty() || positions.size() > ReceiverSet::kConvexCheckVertices) return false;
+    Aabb bounds;
+    for (const glm::vec3& p : positions)
+        bounds.extend(p);
+    const float tolerance = ReceiverSet::kConvexTolerance * glm::length(bounds.extent());
+    for (std::size_t v = 0; v < positions.size(); ++v) {
+        const glm::vec3 n = glm::normalize(normals[v]);
+        const float plane = glm::dot(n, positions[v]) + tolerance;
+        for (const glm::vec3& p : positions)
+            if (glm::dot(n, p) > plane) return false;
+    }
+    return true;
+}
+
 } // namespace
 
 void ReceiverSet::build(Registry& registry) {
@@ -99,6 +117,7 @@ void ReceiverSet::build(Registry& registry) {
             receiver.vertexCount = std::uint32_t(mesh.positions.size());
             receiver.firstTriangle = std::uint32_t(set.mTriangles.size());
             receiver.triangleCount = std::uint32_t(mesh.indices.size() / 3);
+            receiver.convex = mobile && tangentPlanesSupport(mesh.positions, mesh.normals);
             if (!mobile) set.mStaticVertexCount += receiver.vertexCount;
             set.mPositions.insert(set.mPositions.end(), mesh.positions.begin(),
                                   mesh.positions.end());
