@@ -2,6 +2,8 @@
 
 #include "runtime/core/Error.h"
 
+#include <cmath>
+
 namespace qgi {
 namespace {
 
@@ -11,6 +13,8 @@ namespace {
 constexpr std::uint64_t kMaxStoredSegments = std::uint64_t(1) << 30;
 constexpr std::uint32_t kMaxBounces = 255; // PhotonSegments::bounce is 8 bits
 constexpr std::uint32_t kMaxGridResolution = 128;
+/// Metres a side: the largest scene the glTF importer accepts (kSceneMaxSize).
+constexpr float kMaxDirectionalExtent = 1e6f;
 
 void checkFraction(float value, const char* field, float max) {
     if (!(value > 0.f && value <= max)) // NaN fails too
@@ -37,6 +41,16 @@ void validatePhotonSettings(const PhotonSettings& s) {
     if (s.gridRefreshBudget == 0)
         fail("PhotonSettings.gridRefreshBudget = 0: the path index would never catch up");
     checkFraction(s.compactionFraction, "compactionFraction", 1.f);
+    const Aabb& box = s.directionalBounds;
+    if (box.min != Aabb{}.min || box.max != Aabb{}.max) { // set: a range on every axis
+        for (int axis = 0; axis < 3; ++axis)
+            if (!std::isfinite(box.min[axis]) || !std::isfinite(box.max[axis]) ||
+                !(box.max[axis] - box.min[axis] >= 0.f) ||
+                !(box.max[axis] - box.min[axis] <= kMaxDirectionalExtent))
+                fail("PhotonSettings.directionalBounds: axis ", axis, " spans [", box.min[axis],
+                     ", ", box.max[axis], "], not a finite range of at most ",
+                     kMaxDirectionalExtent, " m");
+    }
     if (!s.punctualLights && !s.emissiveSurfaces)
         fail("PhotonSettings: punctualLights and emissiveSurfaces are both off: nothing emits");
 }

@@ -1,5 +1,7 @@
 #pragma once
 
+#include "runtime/scene/SceneInfo.h"
+
 #include <cstdint>
 
 namespace qgi {
@@ -50,6 +52,14 @@ struct PhotonSettings {
     /// stand-in for hybrid mode) must enable only one of them or the lamp counts twice.
     bool punctualLights = true;
     bool emissiveSurfaces = true;
+    /// The box directional lights cover, metres: their photons start on a rectangle across the
+    /// light just outside it, so a mobile beyond it gets no directional photons and casts no
+    /// photon shadow. Empty (the default): the bounds of every mesh at the first shot, widened
+    /// to the scripted path of each mobile with a PathFollower. Set it to the playable area
+    /// when game code moves mobiles further; a mobile that leaves it is named in a warning.
+    /// Photons spread over a larger box are fewer per square metre. Left as Aabb{} it is unset;
+    /// anything else must be a finite range on every axis.
+    Aabb directionalBounds{};
 };
 
 /// The most photons a store may hold at `maxBounces` (32-bit segment indices with room for

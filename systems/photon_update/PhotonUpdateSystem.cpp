@@ -4,9 +4,12 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
+#include "components/PathFollower.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
+#include "components/Transform.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
@@ -18,6 +21,8 @@
 #include "systems/photon_update/PhotonStore.h"
 
 #include <glm/common.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/matrix.hpp>
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
@@ -65,6 +70,53 @@ Aabb transformBox(const Aabb& box, const glm::mat4& m) {
             glm::vec3(m * glm::vec4(i & 1 ? box.max.x : box.min.x, i & 2 ? box.max.y : box.min.y,
                                     i & 4 ? box.max.z : box.min.z, 1.f)));
     return out;
+}
+
+/// World bounds of everywhere a mobile goes on its scripted path. Positions between keys are
+/// linear: where two keys share a rotation the box between them lies within the boxes at the
+/// two keys; where the rotation turns, within a sphere about each key's position that holds
+/// the mobile turned any way. The parent is taken to stay where it is.
+Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds) {
+    const PathFollower* path = registry.tryGet<PathFollower>(e);
+    const Transform* local = registry.tryGet<Transform>(e);
+    if (!path || !local || path->keys.empty() || objectBounds.empty()) return {};
+    glm::mat4 parentWorld(1.f);
+    if (!local->parent.isNull())
+        if (const WorldTransform* parent = registry.tryGet<WorldTransform>(local->parent))
+            parentWorld = parent->matrix;
+    const glm::vec3 scale = glm::abs(local->scale);
+    const float reach =
+        std::max({scale.x, scale.y, scale.z}) *
+        (glm::length(objectBounds.center()) + 0.5f * glm::length(objectBounds.extent()));
+    const auto keyBox = [&](const PathKey& key) {
+        return transformBox(objectBounds, glm::translate(glm::mat4(1.f), key.position) *
+                                              glm::mat4_cast(key.rotation) *
+                                              glm::scale(glm::mat4(1.f), local->scale));
+    };
+    Aabb sweep;
+    const auto extend = [&](const Aabb& box) {
+        sweep.extend(box.min);
+        sweep.extend(box.max);
+    };
+    const std::vector<PathKey>& keys = path->keys;
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+        extend(keyBox(keys[k]));
+        // (A looping path jumps from its last key back to its first: nothing lies between.)
+        if (k + 1 == keys.size() || keys[k + 1].rotation == keys[k].rotation) continue;
+        for (const PathKey* key : {&keys[k], &keys[k + 1]})
+            extend({key->position - glm::vec3(reach), key->position + glm::vec3(reach)});
+    }
+    return transformBox(sweep, parentWorld);
+}
+
+bool contains(const Aabb& outer, const Aabb& inner) {
+    return glm::all(glm::lessThanEqual(outer.min, inner.min)) &&
+           glm::all(glm::lessThanEqual(inner.max, outer.max));
+}
+
+std::string nameOf(const Registry& registry, Entity e) {
+    const Name* name = registry.tryGet<Name>(e);
+    return name ? str("'", name->value, "'") : str("entity ", e.index);
 }
 
 /// The box widened past rounding (of transformed corners, of rays mapped to object space),
@@ -229,7 +281,7 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
         PhotonEmitter edited = mSources[i]; // a source only: nothing derived to copy yet
         edited.firstPhoton = shot.firstPhoton;
         edited.photonCount = shot.photonCount;
-        prepareEmitter(registry, mSceneBox, edited);
+        prepareEmitter(registry, mDirectionalBox, edited);
         // A light turning on or off changes how photons are shared, and a surface moving to or
         // from a stand-in changes what hybrid mode counts: shoot everything anew.
         if (shines(edited.power) != shines(shot.power) || edited.directDrawn != shot.directDrawn)
@@ -268,6 +320,12 @@ bool PhotonUpdateSystem::sharesDrifted() const {
     return false;
 }
 
+bool PhotonUpdateSystem::litByDirectionalLight() const {
+    return std::any_of(mEmitters.begin(), mEmitters.end(), [](const PhotonEmitter& e) {
+        return e.kind == EmitterKind::Directional && e.photonCount > 0;
+    });
+}
+
 bool PhotonUpdateSystem::albedoChanged(const Registry& registry) const {
     for (const Entity e : registry.changed<Material>()) {
         if (e.index >= mAlbedo.size() || !registry.alive(e) || !isTraced(registry, e)) continue;
@@ -304,6 +362,25 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
             mMobiles.push_back(mobile);
         });
     if (mSceneBox.empty()) mSceneBox = {glm::vec3(-1.f), glm::vec3(1.f)};
+
+    const Aabb& chosen = mSettings.directionalBounds;
+    if (chosen.min != Aabb{}.min || chosen.max != Aabb{}.max) {
+        mDirectionalBox = chosen;
+        return;
+    }
+    mDirectionalBox = mSceneBox;
+    for (const Mobile& mobile : mMobiles) {
+        const Aabb sweep = scriptedSweep(registry, mobile.entity, mobile.objectBounds);
+        if (sweep.empty()) continue;
+        mDirectionalBox.extend(sweep.min);
+        mDirectionalBox.extend(sweep.max);
+        // Photons spread over a box twice as wide are a quarter as dense.
+        if (glm::any(glm::greaterThan(sweep.extent(), 2.f * mSceneBox.extent())))
+            logWarning("photons: the scripted path of mobile ", nameOf(registry, mobile.entity),
+                       " reaches far beyond the scene; directional lights spread their photons "
+                       "over it too (set PhotonSettings::directionalBounds to the area that "
+                       "matters)");
+    }
 }
 
 void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scene,
@@ -324,7 +401,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
             if (mSources[i].kind == EmitterKind::Surface)
                 mSources[i].directDrawn = hasLightStandIn(registry, mSources[i].entity);
         } else {
-            prepareEmitter(registry, mSceneBox, mSources[i]);
+            prepareEmitter(registry, mDirectionalBox, mSources[i]);
         }
     }
     std::swap(mEmitters, mSources);
@@ -388,6 +465,14 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
                           glm::mat3(pose) == glm::mat3(mobile.pose) ? &mobile : nullptr});
         mobile.pose = pose;
         delta.movedMobiles.push_back(e);
+        if (!mobile.warnedOutside && litByDirectionalLight() &&
+            !contains(mDirectionalBox, transformBox(mobile.objectBounds, pose))) {
+            mobile.warnedOutside = true;
+            logWarning("photons: mobile ", nameOf(registry, e),
+                       " left the box the directional lights cover; beyond it no directional "
+                       "photons reach it (set PhotonSettings::directionalBounds to the area it "
+                       "moves in)");
+        }
     }
     mStats.movedMobiles = mMoved.size();
 }

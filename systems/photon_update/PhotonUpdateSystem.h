@@ -46,9 +46,11 @@ class PhotonPathGrid;
  *     its whole old and new path. Until then the light's photons mix old and new shots (a
  *     light that moves every frame shows a smear over its last photons / reshootBudget
  *     frames).
- *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds (a
- *  directional light's footprint) and its set of mobiles are captured at the first shot: a
- *  scene whose meshes are added or removed needs a new RayScene and a new system.
+ *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
+ *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
+ *  needs a new RayScene and a new system. So is the box directional lights cover
+ *  (PhotonSettings::directionalBounds; by default the scene's bounds and the scripted paths of
+ *  mobiles with a PathFollower); a mobile that leaves it is named in a warning, once.
  *  A re-traced path is rewritten in place when it fits, else appended; the store is compacted
  *  when its garbage passes compactionFraction. The grid is told which paths changed and
  *  re-indexes up to gridRefreshBudget paths a frame.
@@ -57,6 +59,7 @@ class PhotonPathGrid;
  *  ray set must not change when only the frame does).
  *
  *  Reads:  const WorldTransform (and its change list), const StaticMesh, const MobileMesh,
+ *          const PathFollower, const Transform, const Name (at the first shot),
  *          const Mesh, const Material (and its change list), const PointLight,
  *          const SpotLight, const DirectionalLight, ctx<const RayScene> (synced this frame)
  *  Writes: ctx<PhotonStore>, ctx<PhotonDelta>, ctx<PhotonPathGrid> (created when missing)  */
@@ -96,6 +99,7 @@ private:
         Aabb objectBounds;
         glm::mat4 pose{1.f}; ///< the pose the stored paths were traced against
         std::vector<glm::vec3> facetNormals; ///< unit, object space, per triangle (0: degenerate)
+        bool warnedOutside = false;          ///< named once for leaving the directional lights' box
         /// Triangles a and b lie in one plane facing the same way (a == b included).
         bool sameFacet(std::uint32_t a, std::uint32_t b) const;
     };
@@ -179,6 +183,8 @@ private:
                const MovedMobile& mobile, float tolerance, std::uint32_t& primitive) const;
     void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
     void compact(PhotonStore& store);
+    /// Whether a directional light has photons in the store.
+    bool litByDirectionalLight() const;
     /// Store capacity for `live` segments.
     std::size_t capacityFor(std::size_t live) const;
     PhotonTracer::Surfaces surfaces() const;
@@ -186,7 +192,8 @@ private:
     PhotonSettings mSettings;
     PhotonTracer mTracer;
     bool mShot = false;
-    Aabb mSceneBox;
+    Aabb mSceneBox;       ///< every mesh at the first shot: the path grid's box
+    Aabb mDirectionalBox; ///< what directional lights cover (PhotonSettings::directionalBounds)
     std::vector<PhotonEmitter> mEmitters; ///< as shot; index = PhotonPath::light
     std::vector<Sweep> mSweeps;           ///< per emitter
     std::vector<glm::vec3> mAlbedo;       ///< by Entity::index, as shot

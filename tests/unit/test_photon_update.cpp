@@ -2,7 +2,10 @@
 // against a full re-shoot, moving lights, energy in a closed box, settings checks.
 #include "systems/photon_update/PhotonUpdateSystem.h"
 
+#include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
+#include "components/PathFollower.h"
+#include "components/Transform.h"
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
 #include "systems/detp/DetpIrradianceSystem.h"
@@ -14,6 +17,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <glm/gtc/constants.hpp>
 #include <glm/gtc/quaternion.hpp>
 
 #include <algorithm>
@@ -22,6 +26,7 @@
 #include <limits>
 #include <optional>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace qgi {
@@ -701,6 +706,100 @@ TEST(PhotonUpdate, ClosedColouredBoxKeepsEachChannelUnbiased) {
 // ---- settings
 // ------------------------------------------------------------------------------------
 
+// ---- the box directional lights cover -------------------------------------------------------
+
+/// A 2 x 2 m floor lit by a sun straight down and a 0.4 m mobile box resting on it at (1, 1),
+/// with, when `scripted`, a path that hoists it 3 m up: far above the rest of the scene.
+struct SunLitHoist {
+    Registry registry;
+    Entity box;
+    static constexpr float kHalf = 0.2f;
+    const glm::vec3 low{1.f, kHalf, 1.f}, high{1.f, 3.f, 1.f};
+
+    explicit SunLitHoist(bool scripted) {
+        test::addMesh(registry,
+                      test::gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 4),
+                      glm::mat4(1.f), test::grey(0.5f), false, "floor");
+        box = test::addMesh(registry, test::boxMesh(glm::vec3(kHalf)), translation(low),
+                            test::grey(0.5f), true, "hoisted box");
+        registry.emplace<Transform>(box, Transform{low});
+        if (scripted) registry.emplace<PathFollower>(box, PathFollower{{{0.f, low}, {4.f, high}}});
+        const Entity sun = registry.create(); // its -Z axis points down
+        registry.emplace<WorldTransform>(
+            sun, glm::rotate(glm::mat4(1.f), -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f)));
+        registry.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 1.f});
+        buildRayScene(registry);
+    }
+
+    /// Photons of the first bounce that land on the box (on its top: the sun is parallel to
+    /// its sides).
+    std::size_t directHits() const {
+        const PhotonStore& store = storeOf(registry);
+        std::size_t hits = 0;
+        for (const PhotonPath& path : store.paths)
+            hits += path.count > 0 && store.segments.hitEntity[path.first] == box ? 1 : 0;
+        return hits;
+    }
+};
+
+/// With the sun's photons spread evenly over `footprint` m^2, the box's 0.16 m^2 top takes each
+/// with probability p: its hits are within 4 binomial standard errors of N p (the Halton
+/// emission spreads them more evenly than independent draws, never less).
+void expectTopLit(std::size_t hits, std::uint32_t photons, double footprint) {
+    const double p = 4.0 * SunLitHoist::kHalf * SunLitHoist::kHalf / footprint;
+    const double mean = photons * p, sigma = std::sqrt(photons * p * (1.0 - p));
+    EXPECT_NEAR(double(hits), mean, 4.0 * sigma);
+}
+
+TEST(PhotonUpdate, DirectionalLightsCoverTheScriptedPathsOfMobiles) {
+    SunLitHoist scene(true);
+    PhotonUpdateSystem system(settingsWith(20'000));
+    firstUpdate(scene.registry, system);
+    // The rectangle the photons start on lies above the path's top, not just above the box.
+    const PhotonStore& store = storeOf(scene.registry);
+    float lowest = std::numeric_limits<float>::max();
+    for (const PhotonPath& path : store.paths)
+        lowest = std::min(lowest, store.segments.origin[path.first].y);
+    EXPECT_GT(lowest, scene.high.y + SunLitHoist::kHalf);
+    // The path stays over the floor, so the sun still covers 2 x 2 m.
+    expectTopLit(scene.directHits(), 20'000, 4.0);
+
+    ::testing::internal::CaptureStderr();
+    test::moveAndUpdate(scene.registry, system, scene.box, translation(scene.high), 1);
+    EXPECT_EQ(::testing::internal::GetCapturedStderr(), ""); // inside the box: no warning
+    EXPECT_GT(system.lastFrame().retracedPaths, 0u);
+    expectTopLit(scene.directHits(), 20'000, 4.0);
+}
+
+TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCovered) {
+    {
+        SunLitHoist scene(false); // moved by game code: nothing foresees the hoist
+        PhotonUpdateSystem system(settingsWith(20'000));
+        firstUpdate(scene.registry, system);
+        ::testing::internal::CaptureStderr();
+        test::moveAndUpdate(scene.registry, system, scene.box, translation(scene.high), 1);
+        test::moveAndUpdate(scene.registry, system, scene.box,
+                            translation(scene.high + glm::vec3(0.f, 0.1f, 0.f)), 2);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_THAT(log, HasSubstr("'hoisted box' left the box the directional lights cover"));
+        EXPECT_THAT(log, HasSubstr("directionalBounds"));
+        EXPECT_EQ(log.find("left the box"), log.rfind("left the box")) << "named twice: " << log;
+        // Up there it is above where the photons start: dark, and no shadow below.
+        EXPECT_EQ(scene.directHits(), 0u);
+    }
+    {
+        SunLitHoist scene(false);
+        PhotonSettings settings = settingsWith(20'000);
+        settings.directionalBounds = {{0.f, 0.f, 0.f}, {2.f, 4.f, 2.f}};
+        PhotonUpdateSystem system(settings);
+        firstUpdate(scene.registry, system);
+        ::testing::internal::CaptureStderr();
+        test::moveAndUpdate(scene.registry, system, scene.box, translation(scene.high), 1);
+        EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+        expectTopLit(scene.directHits(), 20'000, 4.0);
+    }
+}
+
 TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
     const auto rejects = [](auto edit, const char* field) {
         PhotonSettings s;
@@ -727,6 +826,24 @@ TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
             s.emissiveSurfaces = false;
         },
         "punctualLights");
+    rejects(
+        [](PhotonSettings& s) {
+            s.directionalBounds = {glm::vec3(0.f), {1.f, NAN, 1.f}};
+        },
+        "directionalBounds");
+    rejects(
+        [](PhotonSettings& s) {
+            s.directionalBounds = {glm::vec3(0.f), {1.f, -1.f, 1.f}};
+        },
+        "directionalBounds");
+    rejects(
+        [](PhotonSettings& s) {
+            s.directionalBounds = {glm::vec3(-1e7f), glm::vec3(1e7f)};
+        },
+        "directionalBounds");
+    PhotonSettings flat;
+    flat.directionalBounds = {glm::vec3(0.f), {10.f, 0.f, 10.f}}; // a plane is a range too
+    EXPECT_NO_THROW(PhotonUpdateSystem{flat});
     EXPECT_NO_THROW(PhotonUpdateSystem{PhotonSettings{}});
 }
 

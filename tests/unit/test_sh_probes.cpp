@@ -819,7 +819,7 @@ TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
             break;
         }
         room.system.update(w, FrameContext{1});
-        const std::uint32_t probes = w.ctx().get<ProbeVolume>().probeCount();
+        const std::size_t probes = w.ctx().get<ProbeVolume>().probeCount();
         if (trigger == Trigger::None)
             EXPECT_EQ(room.system.staleCount(), 0u);
         else
