@@ -7,7 +7,6 @@
 
 #include <nlohmann/json.hpp>
 
-#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <fstream>
@@ -342,7 +341,16 @@ void GltfReader::checkUri(const nlohmann::json& object, const std::string& secti
     }
     const fs::path file = resolveUri(field, uri);
     std::error_code error;
-    if (!fs::is_regular_file(file, error)) fail(field, "'", uri, "' not found next to the scene");
+    if (!fs::is_regular_file(file, error)) {
+        // URIs read '+' as a space: a file named with a plus is found only as %2B.
+        if (uri.find('+') != uri.npos) {
+            if (fs::is_regular_file(resolveUri(field, uri, false), error))
+                fail(field, "'", uri, "' names '", file.filename().string(),
+                     "' (a URI reads '+' as a space); to name the file with a plus, write it as "
+                     "%2B");
+        }
+        fail(field, "'", uri, "' not found next to the scene");
+    }
     const std::uintmax_t size = fs::file_size(file, error);
     if (error) fail(field, "cannot read '", uri, "': ", error.message());
     if (size > kGltfMaxFileBytes)
@@ -352,12 +360,13 @@ void GltfReader::checkUri(const nlohmann::json& object, const std::string& secti
              " bytes");
 }
 
-fs::path GltfReader::resolveUri(const std::string& field, const std::string& uri) const {
+fs::path GltfReader::resolveUri(const std::string& field, const std::string& uri,
+                                bool plusIsSpace) const {
     // Decode exactly as tinygltf will ('+' is a space, %XX a byte), so the file checked here
     // is the file it opens.
     std::string path;
     for (std::size_t i = 0; i < uri.size(); ++i) {
-        if (uri[i] == '+') {
+        if (uri[i] == '+' && plusIsSpace) {
             path += ' ';
         } else if (uri[i] == '%') {
             if (i + 2 >= uri.size() || !std::isxdigit(static_cast<unsigned char>(uri[i + 1])) ||

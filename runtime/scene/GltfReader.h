@@ -160,8 +160,11 @@ private:
     void checkTypes(const nlohmann::json& document) const;
     void checkUri(const nlohmann::json& object, const std::string& section, std::size_t index,
                   bool isBuffer) const;
-    /// The file a relative URI names inside the scene's folder; throws for anything else.
-    fs::path resolveUri(const std::string& field, const std::string& uri) const;
+    /// The file a relative URI names inside the scene's folder, decoded as tinygltf decodes it
+    /// (plusIsSpace: '+' reads as a space; false only to explain a file that was not found);
+    /// throws for anything else.
+    fs::path resolveUri(const std::string& field, const std::string& uri,
+                        bool plusIsSpace = true) const;
 
     // Images (GltfImages.cpp).
     /// Which images a material draws (ImageDecoding::used); after checkTypes.

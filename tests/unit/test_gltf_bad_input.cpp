@@ -9,6 +9,7 @@
 
 #include "components/Mesh.h"
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -19,6 +20,8 @@
 
 namespace qgi {
 namespace {
+
+using ::testing::HasSubstr;
 
 namespace fs = std::filesystem;
 
@@ -199,6 +202,30 @@ TEST(GltfBadInput, MissingFileAndUnknownExtensionNameThePath) {
     EXPECT_EQ(
         importFailure(kData / "good" / "triangle.bin").rfind("triangle.bin: unknown extension", 0),
         0u);
+}
+
+TEST(GltfBadInput, APlusInAFileNameIsExplained) {
+    // A URI reads '+' as a space: "tri+angle.bin" names "tri angle.bin". The file with the plus
+    // is there, so the error says how to name it; written as %2B it loads.
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("tri+angle.bin"),
+                  fs::copy_options::overwrite_existing);
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto withUri = [&](const std::string& file, const std::string& uri) {
+        std::string edited = text;
+        const std::string from = R"("uri": "triangle.bin")";
+        edited.replace(edited.find(from), from.size(), R"("uri": ")" + uri + R"(")");
+        std::ofstream(scratchFile(file)) << edited;
+        return scratchFile(file);
+    };
+    const std::string message = importFailure(withUri("plus.gltf", "tri+angle.bin"));
+    EXPECT_EQ(message.rfind("plus.gltf: buffers[0].uri", 0), 0u) << message;
+    EXPECT_THAT(message, HasSubstr("'tri angle.bin'"));
+    EXPECT_THAT(message, HasSubstr("%2B"));
+    Registry registry;
+    EXPECT_NO_THROW(
+        importGltf(registry, withUri("escaped.gltf", "tri%2Bangle.bin"), kNoRefinement));
+    EXPECT_GT(registry.aliveCount(), 0u);
 }
 
 TEST(GltfBadInput, FailureWhileProcessingMeshesLeavesTheRegistryEmpty) {
