@@ -37,7 +37,8 @@ std::string printable(std::string_view text) {
     };
     for (std::size_t i = 0; i < text.size(); ++i) {
         const auto byte = static_cast<unsigned char>(text[i]);
-        const auto next = i + 1 < text.size() ? static_cast<unsigned char>(text[i + 1]) : 0;
+        const unsigned char next =
+            i + 1 < text.size() ? static_cast<unsigned char>(text[i + 1]) : 0;
         if (byte < 0x20 || byte == 0x7f) {
             escape(byte);
         } else if (byte == 0xc2 && next >= 0x80 && next <= 0x9f) { // C1 controls in UTF-8

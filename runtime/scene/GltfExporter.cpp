@@ -260,9 +260,9 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
         }
 
         if (const Camera* camera = registry.tryGet<Camera>(e)) cameras.emplace_back(camera, int(i));
-        if (const PathFollower* path = registry.tryGet<PathFollower>(e);
-            path && !path->keys.empty())
-            addPathAnimation(model, buffer, *path, int(i));
+        if (const PathFollower* follower = registry.tryGet<PathFollower>(e);
+            follower && !follower->keys.empty())
+            addPathAnimation(model, buffer, *follower, int(i));
     }
 
     std::stable_partition(cameras.begin(), cameras.end(),
