@@ -42,7 +42,8 @@ struct PhotonSegments;
  *     scanned. Without a PhotonPathGrid resource every stored path is a candidate.
  *  A segment that starts on a convex mobile (ReceiverSet::Receiver::convex) is not traced
  *  through that mobile's discs, in full estimates and deltas alike: it cannot cross one from the
- *  front, save at t = 0 leaving across an edge, which is light leaving the surface.
+ *  front, save from an origin lifted a hair off the surface or lying on a disc's plane, and
+ *  such a crossing is light leaving the surface, not arriving.
  *  Sums are kept per vertex in double precision and applied in a fixed order (DiscIndex), so
  *  the same frames give bit-identical irradiance on any thread count.
  *

@@ -81,11 +81,13 @@ bool tangentPlanesSupport(std::span<const glm::vec3> positions,
     for (const glm::vec3& p : positions)
         bounds.extend(p);
     const float tolerance = ReceiverSet::kConvexTolerance * glm::length(bounds.extent());
+    // About the mesh's centre, so a mesh modelled far from its own origin keeps its precision.
+    const glm::vec3 centre = bounds.center();
     for (std::size_t v = 0; v < positions.size(); ++v) {
         const glm::vec3 n = glm::normalize(normals[v]);
-        const float plane = glm::dot(n, positions[v]) + tolerance;
+        const float plane = glm::dot(n, positions[v] - centre) + tolerance;
         for (const glm::vec3& p : positions)
-            if (glm::dot(n, p) > plane) return false;
+            if (glm::dot(n, p - centre) > plane) return false;
     }
     return true;
 }

@@ -2,6 +2,8 @@
 
 #include "runtime/core/Error.h"
 
+#include <glm/vector_relational.hpp>
+
 #include <cmath>
 
 namespace qgi {
@@ -50,6 +52,9 @@ void validatePhotonSettings(const PhotonSettings& s) {
                 fail("PhotonSettings.directionalBounds: axis ", axis, " spans [", box.min[axis],
                      ", ", box.max[axis], "], not a finite range of at most ",
                      kMaxDirectionalExtent, " m");
+        const glm::bvec3 flat = glm::equal(box.min, box.max);
+        if (int(flat.x) + int(flat.y) + int(flat.z) >= 2)
+            fail("PhotonSettings.directionalBounds: a line or a point, which no light covers");
     }
     if (!s.punctualLights && !s.emissiveSurfaces)
         fail("PhotonSettings: punctualLights and emissiveSurfaces are both off: nothing emits");

@@ -58,7 +58,7 @@ struct PhotonSettings {
     /// to the scripted path of each mobile with a PathFollower. Set it to the playable area
     /// when game code moves mobiles further; a mobile that leaves it is named in a warning.
     /// Photons spread over a larger box are fewer per square metre. Left as Aabb{} it is unset;
-    /// anything else must be a finite range on every axis.
+    /// anything else must be a finite range on every axis, flat on one axis at most.
     Aabb directionalBounds{};
 };
 

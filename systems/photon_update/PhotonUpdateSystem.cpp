@@ -72,41 +72,60 @@ Aabb transformBox(const Aabb& box, const glm::mat4& m) {
     return out;
 }
 
-/// World bounds of everywhere a mobile goes on its scripted path. Positions between keys are
-/// linear: where two keys share a rotation the box between them lies within the boxes at the
-/// two keys; where the rotation turns, within a sphere about each key's position that holds
-/// the mobile turned any way. The parent is taken to stay where it is.
-Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds) {
-    const PathFollower* path = registry.tryGet<PathFollower>(e);
-    const Transform* local = registry.tryGet<Transform>(e);
-    if (!path || !local || path->keys.empty() || objectBounds.empty()) return {};
-    glm::mat4 parentWorld(1.f);
-    if (!local->parent.isNull())
-        if (const WorldTransform* parent = registry.tryGet<WorldTransform>(local->parent))
-            parentWorld = parent->matrix;
-    const glm::vec3 scale = glm::abs(local->scale);
+/// The box `box` (in the local frame of a node with `scale`) sweeps as the node follows `path`,
+/// in the node's parent frame. Positions between keys are linear: where two keys share a
+/// rotation the box between them lies within the boxes at the two keys; where the rotation
+/// turns, within a sphere about each key's position that holds the box turned any way.
+Aabb sweepAlong(const PathFollower& path, const glm::vec3& scale, const Aabb& box) {
+    const glm::vec3 s = glm::abs(scale);
     const float reach =
-        std::max({scale.x, scale.y, scale.z}) *
-        (glm::length(objectBounds.center()) + 0.5f * glm::length(objectBounds.extent()));
-    const auto keyBox = [&](const PathKey& key) {
-        return transformBox(objectBounds, glm::translate(glm::mat4(1.f), key.position) *
-                                              glm::mat4_cast(key.rotation) *
-                                              glm::scale(glm::mat4(1.f), local->scale));
-    };
+        std::max({s.x, s.y, s.z}) * (glm::length(box.center()) + 0.5f * glm::length(box.extent()));
+    const glm::mat4 scaling = glm::scale(glm::mat4(1.f), scale);
     Aabb sweep;
-    const auto extend = [&](const Aabb& box) {
-        sweep.extend(box.min);
-        sweep.extend(box.max);
+    const auto extend = [&](const Aabb& b) {
+        sweep.extend(b.min);
+        sweep.extend(b.max);
     };
-    const std::vector<PathKey>& keys = path->keys;
+    const std::vector<PathKey>& keys = path.keys;
     for (std::size_t k = 0; k < keys.size(); ++k) {
-        extend(keyBox(keys[k]));
+        extend(transformBox(box, glm::translate(glm::mat4(1.f), keys[k].position) *
+                                     glm::mat4_cast(keys[k].rotation) * scaling));
         // (A looping path jumps from its last key back to its first: nothing lies between.)
         if (k + 1 == keys.size() || keys[k + 1].rotation == keys[k].rotation) continue;
         for (const PathKey* key : {&keys[k], &keys[k + 1]})
             extend({key->position - glm::vec3(reach), key->position + glm::vec3(reach)});
     }
-    return transformBox(sweep, parentWorld);
+    return sweep;
+}
+
+/// World bounds of everywhere a mobile goes while it, or a node above it (a glTF mesh's
+/// primitives hang below the animated node), follows a scripted path; empty when none does.
+/// Walking up from the mobile, each node carries the box into its parent's frame: along its
+/// path when it has one, else at its present local pose. Nodes without a Transform, or a
+/// chain deeper than any real scene's, end the walk at the world transform they have.
+Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds) {
+    constexpr int kMaxDepth = 256;
+    if (objectBounds.empty()) return {};
+    Aabb box = objectBounds;
+    bool scripted = false;
+    for (int depth = 0; depth < kMaxDepth && !e.isNull(); ++depth) {
+        const Transform* local = registry.tryGet<Transform>(e);
+        const PathFollower* path = registry.tryGet<PathFollower>(e);
+        if (!local) {
+            const WorldTransform* world = registry.tryGet<WorldTransform>(e);
+            return scripted && world ? transformBox(box, world->matrix) : Aabb{};
+        }
+        if (path && !path->keys.empty()) {
+            box = sweepAlong(*path, local->scale, box);
+            scripted = true;
+        } else {
+            box = transformBox(box, glm::translate(glm::mat4(1.f), local->translation) *
+                                        glm::mat4_cast(local->rotation) *
+                                        glm::scale(glm::mat4(1.f), local->scale));
+        }
+        e = local->parent;
+    }
+    return scripted && e.isNull() ? box : Aabb{};
 }
 
 bool contains(const Aabb& outer, const Aabb& inner) {
@@ -369,18 +388,27 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
         return;
     }
     mDirectionalBox = mSceneBox;
+    // Photons spread over a box twice as wide are a quarter as dense: a path that reaches past
+    // the scene box grown to twice its size is named.
+    const Aabb roomy{mSceneBox.center() - mSceneBox.extent(),
+                     mSceneBox.center() + mSceneBox.extent()};
+    const bool sun = std::any_of(mSources.begin(), mSources.end(), [](const PhotonEmitter& e) {
+        return e.kind == EmitterKind::Directional;
+    });
+    std::string far;
     for (const Mobile& mobile : mMobiles) {
         const Aabb sweep = scriptedSweep(registry, mobile.entity, mobile.objectBounds);
         if (sweep.empty()) continue;
         mDirectionalBox.extend(sweep.min);
         mDirectionalBox.extend(sweep.max);
-        // Photons spread over a box twice as wide are a quarter as dense.
-        if (glm::any(glm::greaterThan(sweep.extent(), 2.f * mSceneBox.extent())))
-            logWarning("photons: the scripted path of mobile ", nameOf(registry, mobile.entity),
-                       " reaches far beyond the scene; directional lights spread their photons "
-                       "over it too (set PhotonSettings::directionalBounds to the area that "
-                       "matters)");
+        if (!contains(roomy, sweep))
+            far += str(far.empty() ? "" : ", ", nameOf(registry, mobile.entity));
     }
+    if (sun && !far.empty())
+        logWarning("photons: the scripted paths of ", far,
+                   " reach far beyond the scene; "
+                   "directional lights spread their photons over them too (set "
+                   "PhotonSettings::directionalBounds to the area that matters)");
 }
 
 void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scene,
@@ -466,7 +494,7 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
         mobile.pose = pose;
         delta.movedMobiles.push_back(e);
         if (!mobile.warnedOutside && litByDirectionalLight() &&
-            !contains(mDirectionalBox, transformBox(mobile.objectBounds, pose))) {
+            !contains(widened(mDirectionalBox), transformBox(mobile.objectBounds, pose))) {
             mobile.warnedOutside = true;
             logWarning("photons: mobile ", nameOf(registry, e),
                        " left the box the directional lights cover; beyond it no directional "

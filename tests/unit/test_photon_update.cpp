@@ -703,27 +703,38 @@ TEST(PhotonUpdate, ClosedColouredBoxKeepsEachChannelUnbiased) {
     expectClosedBoxEnergy({0.3f, 0.5f, 0.7f});
 }
 
-// ---- settings
-// ------------------------------------------------------------------------------------
-
 // ---- the box directional lights cover -------------------------------------------------------
 
+/// Who follows the hoist's scripted path: nobody (game code moves the box), the box itself, or
+/// a node above it (as glTF puts a mesh's primitives below the animated node).
+enum class Hoist { ByGameCode, Itself, ByParent };
+
 /// A 2 x 2 m floor lit by a sun straight down and a 0.4 m mobile box resting on it at (1, 1),
-/// with, when `scripted`, a path that hoists it 3 m up: far above the rest of the scene.
+/// with a path that hoists it 3 m up: far above the rest of the scene.
 struct SunLitHoist {
     Registry registry;
     Entity box;
     static constexpr float kHalf = 0.2f;
     const glm::vec3 low{1.f, kHalf, 1.f}, high{1.f, 3.f, 1.f};
 
-    explicit SunLitHoist(bool scripted) {
+    explicit SunLitHoist(Hoist hoist) {
         test::addMesh(registry,
                       test::gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 4),
                       glm::mat4(1.f), test::grey(0.5f), false, "floor");
         box = test::addMesh(registry, test::boxMesh(glm::vec3(kHalf)), translation(low),
                             test::grey(0.5f), true, "hoisted box");
-        registry.emplace<Transform>(box, Transform{low});
-        if (scripted) registry.emplace<PathFollower>(box, PathFollower{{{0.f, low}, {4.f, high}}});
+        const PathFollower path{{{0.f, low}, {4.f, high}}};
+        if (hoist == Hoist::ByParent) {
+            const Entity hook = registry.create();
+            registry.emplace<Transform>(hook, Transform{low});
+            registry.emplace<WorldTransform>(hook, translation(low));
+            registry.emplace<PathFollower>(hook, path);
+            registry.emplace<Transform>(
+                box, Transform{glm::vec3(0.f), {1.f, 0.f, 0.f, 0.f}, glm::vec3(1.f), hook});
+        } else {
+            registry.emplace<Transform>(box, Transform{low});
+            if (hoist == Hoist::Itself) registry.emplace<PathFollower>(box, path);
+        }
         const Entity sun = registry.create(); // its -Z axis points down
         registry.emplace<WorldTransform>(
             sun, glm::rotate(glm::mat4(1.f), -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f)));
@@ -752,28 +763,31 @@ void expectTopLit(std::size_t hits, std::uint32_t photons, double footprint) {
 }
 
 TEST(PhotonUpdate, DirectionalLightsCoverTheScriptedPathsOfMobiles) {
-    SunLitHoist scene(true);
-    PhotonUpdateSystem system(settingsWith(20'000));
-    firstUpdate(scene.registry, system);
-    // The rectangle the photons start on lies above the path's top, not just above the box.
-    const PhotonStore& store = storeOf(scene.registry);
-    float lowest = std::numeric_limits<float>::max();
-    for (const PhotonPath& path : store.paths)
-        lowest = std::min(lowest, store.segments.origin[path.first].y);
-    EXPECT_GT(lowest, scene.high.y + SunLitHoist::kHalf);
-    // The path stays over the floor, so the sun still covers 2 x 2 m.
-    expectTopLit(scene.directHits(), 20'000, 4.0);
+    for (const Hoist hoist : {Hoist::Itself, Hoist::ByParent}) {
+        SCOPED_TRACE(hoist == Hoist::Itself ? "the box follows the path" : "its parent does");
+        SunLitHoist scene(hoist);
+        PhotonUpdateSystem system(settingsWith(20'000));
+        firstUpdate(scene.registry, system);
+        // The rectangle the photons start on lies above the path's top, not just above the box.
+        const PhotonStore& store = storeOf(scene.registry);
+        float lowest = std::numeric_limits<float>::max();
+        for (const PhotonPath& path : store.paths)
+            lowest = std::min(lowest, store.segments.origin[path.first].y);
+        EXPECT_GT(lowest, scene.high.y + SunLitHoist::kHalf);
+        // The path stays over the floor, so the sun still covers 2 x 2 m.
+        expectTopLit(scene.directHits(), 20'000, 4.0);
 
-    ::testing::internal::CaptureStderr();
-    test::moveAndUpdate(scene.registry, system, scene.box, translation(scene.high), 1);
-    EXPECT_EQ(::testing::internal::GetCapturedStderr(), ""); // inside the box: no warning
-    EXPECT_GT(system.lastFrame().retracedPaths, 0u);
-    expectTopLit(scene.directHits(), 20'000, 4.0);
+        ::testing::internal::CaptureStderr();
+        test::moveAndUpdate(scene.registry, system, scene.box, translation(scene.high), 1);
+        EXPECT_EQ(::testing::internal::GetCapturedStderr(), ""); // inside the box: no warning
+        EXPECT_GT(system.lastFrame().retracedPaths, 0u);
+        expectTopLit(scene.directHits(), 20'000, 4.0);
+    }
 }
 
 TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCovered) {
     {
-        SunLitHoist scene(false); // moved by game code: nothing foresees the hoist
+        SunLitHoist scene(Hoist::ByGameCode); // nothing foresees the hoist
         PhotonUpdateSystem system(settingsWith(20'000));
         firstUpdate(scene.registry, system);
         ::testing::internal::CaptureStderr();
@@ -788,7 +802,7 @@ TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCo
         EXPECT_EQ(scene.directHits(), 0u);
     }
     {
-        SunLitHoist scene(false);
+        SunLitHoist scene(Hoist::ByGameCode);
         PhotonSettings settings = settingsWith(20'000);
         settings.directionalBounds = {{0.f, 0.f, 0.f}, {2.f, 4.f, 2.f}};
         PhotonUpdateSystem system(settings);
@@ -799,6 +813,8 @@ TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCo
         expectTopLit(scene.directHits(), 20'000, 4.0);
     }
 }
+
+// ---- settings ------------------------------------------------------------------------------
 
 TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
     const auto rejects = [](auto edit, const char* field) {
@@ -839,6 +855,11 @@ TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
     rejects(
         [](PhotonSettings& s) {
             s.directionalBounds = {glm::vec3(-1e7f), glm::vec3(1e7f)};
+        },
+        "directionalBounds");
+    rejects(
+        [](PhotonSettings& s) {
+            s.directionalBounds = {glm::vec3(1.f), {1.f, 1.f, 5.f}};
         },
         "directionalBounds");
     PhotonSettings flat;
