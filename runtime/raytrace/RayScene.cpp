@@ -1,16 +1,18 @@
 #include "runtime/raytrace/RayScene.h"
 
-#include "runtime/core/Finite.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Finite.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Pose.h"
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
+#include <glm/vector_relational.hpp>
 
 #include <algorithm>
 #include <array>
@@ -30,11 +32,6 @@ std::string describe(const Registry& registry, Entity e, const char* kind) {
     std::string out = str("RayScene: ", kind, " entity ", e.index);
     if (const Name* name = registry.tryGet<Name>(e)) out += str(" '", name->value, "'");
     return out;
-}
-
-bool isInvertible(const glm::mat4& m) {
-    const float det = glm::determinant(glm::mat3(m));
-    return isFinite(m) && std::isfinite(det) && det != 0.f;
 }
 
 /// The Mesh and world matrix of a mesh entity, checked so Embree only ever sees finite
@@ -79,8 +76,10 @@ GeometryHandle newTriangles(RTCDevice device, const Mesh& mesh, const glm::mat4&
     if (!vertices || !triangles) fail(who, ": Embree could not allocate its buffers");
     for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
         vertices[i] = glm::vec3(toScene * glm::vec4(mesh.positions[i], 1.f));
-        if (!isFinite(vertices[i]))
-            fail(who, ": Mesh.positions[", i, "] is not finite in world space");
+        if (!isFinite(vertices[i]) ||
+            glm::any(glm::greaterThan(glm::abs(vertices[i]), glm::vec3(kMaxPoseReach))))
+            fail(who, ": Mesh.positions[", i, "] is not finite or lies farther than ",
+                 kMaxPoseReach, " m from the origin");
     }
     std::copy(mesh.indices.begin(), mesh.indices.end(), triangles);
     rtcCommitGeometry(geometry.get());
@@ -202,8 +201,9 @@ void RayScene::build(const Registry& registry) {
     registry.view<const MobileMesh>().each([&](Entity e, const MobileMesh&) {
         const CheckedMesh checked = checkedMesh(registry, e, "MobileMesh");
         if (checked.mesh.indices.empty()) return;
-        if (!isInvertible(checked.world))
-            fail(describe(registry, e, "MobileMesh"), ": WorldTransform.matrix is not invertible");
+        if (!isUsablePose(checked.world))
+            fail(describe(registry, e, "MobileMesh"),
+                 ": WorldTransform.matrix is not invertible or reaches past ", kMaxPoseReach, " m");
         Mobile mobile{e,
                       newScene(mSettings.buildQuality, RTC_SCENE_FLAG_NONE),
                       {},
@@ -235,9 +235,10 @@ void RayScene::build(const Registry& registry) {
 }
 
 bool RayScene::placeMobile(Mobile& mobile, const glm::mat4& pose) {
-    if (!isInvertible(pose)) {
-        logWarning("RayScene: ignoring a non-invertible pose for mobile entity ",
-                   mobile.entity.index);
+    if (!isUsablePose(pose)) {
+        logWarning("RayScene: ignoring a pose for mobile entity ", mobile.entity.index,
+                   " that is not finite and invertible or reaches past ", kMaxPoseReach,
+                   " m; it stays where it was");
         return false;
     }
     rtcSetGeometryTransform(mobile.instance.get(), 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,
@@ -395,7 +396,7 @@ bool RayScene::occludedWithFilter(const Ray& ray, AcceptFn accept, void* user) c
 
 std::optional<Hit> RayScene::intersectMobile(Entity mobile, const glm::mat4& pose,
                                              const Ray& ray) const {
-    if (!isInvertible(pose)) return std::nullopt;
+    if (!isUsablePose(pose)) return std::nullopt;
     // An affine map keeps the ray parameter: trace the object-space ray, keep t as it is.
     const glm::mat4 toObject = glm::inverse(pose);
     Ray local = ray;

@@ -8,6 +8,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Pose.h"
 
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
@@ -22,13 +23,6 @@ namespace {
 
 bool isFinite(const glm::vec3& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
-}
-
-bool isUsablePose(const glm::mat4& m) {
-    for (int c = 0; c < 4; ++c)
-        if (!isFinite(glm::vec3(m[c])) || !std::isfinite(m[c][3])) return false;
-    const float det = glm::determinant(glm::mat3(m));
-    return std::isfinite(det) && det != 0.f;
 }
 
 std::string describe(const Registry& registry, Entity e, bool mobile) {
@@ -53,7 +47,8 @@ const Mesh& checkedMesh(const Registry& registry, Entity e, bool mobile) {
     const WorldTransform* world = registry.tryGet<WorldTransform>(e);
     if (!world) fail(who, ": has no WorldTransform (run the transform system first)");
     if (!isUsablePose(world->matrix))
-        fail(who, ": WorldTransform.matrix is not finite and invertible");
+        fail(who, ": WorldTransform.matrix is not finite and invertible, or reaches past ",
+             kMaxPoseReach, " m");
     if (mesh->normals.size() != mesh->positions.size())
         fail(who, ": Mesh.normals has ", mesh->normals.size(), " entries for ",
              mesh->positions.size(), " positions");

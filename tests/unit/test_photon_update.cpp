@@ -8,6 +8,7 @@
 #include "components/Transform.h"
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 #include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -515,6 +516,25 @@ TEST(PhotonUpdate, AMobileFarFromEveryPathChangesNothing) {
         EXPECT_EQ(system.lastFrame().movedMobiles, 1u);
         EXPECT_EQ(system.lastFrame().candidatePaths, 0u); // the index knew: no exact tests
     }
+    EXPECT_TRUE(sameStore(before, storeOf(registry)));
+}
+
+TEST(PhotonUpdate, AMobileParkedPastTheRayScenesReachStaysWhereItWas) {
+    // Hiding an object by moving it "far away": past kMaxPoseReach the ray scene keeps its last
+    // pose (Embree aborts on rays that far out), so the photons do not change either.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(20'000));
+    firstUpdate(registry, system);
+    const PhotonStore before = storeOf(registry);
+    setLogLevel(LogLevel::Quiet);
+    for (const float far : {1e30f, 1e19f, 2e7f}) {
+        test::moveAndUpdate(registry, system, room.crate, translation({far, 0.f, 0.f}), 1);
+        EXPECT_TRUE(deltaOf(registry).empty()) << far;
+        EXPECT_EQ(system.lastFrame().movedMobiles, 0u) << far;
+    }
+    setLogLevel(LogLevel::Info);
     EXPECT_TRUE(sameStore(before, storeOf(registry)));
 }
 

@@ -1,3 +1,4 @@
+#include "runtime/math/Pose.h"
 #include "runtime/raytrace/RayScene.h"
 
 #include "components/Avatar.h"
@@ -457,6 +458,12 @@ TEST(RayScene, SetMobilePoseMovesOneMobileAndRejectsBadPoses) {
     setLogLevel(LogLevel::Quiet);
     EXPECT_FALSE(scene.setMobilePose(crate, translation(nan, 0, 0)));
     EXPECT_FALSE(scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(1, 0, 1))));
+    // Parked far away: past kMaxPoseReach (Embree itself aborts on ray origins past ~1.8e18).
+    EXPECT_FALSE(scene.setMobilePose(crate, translation(1e30f, 0, 0)));
+    EXPECT_FALSE(scene.setMobilePose(crate, translation(0, 0, 2 * kMaxPoseReach)));
+    EXPECT_FALSE(scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(2 * kMaxPoseReach))));
+    EXPECT_TRUE(scene.setMobilePose(crate, translation(0, -0.5f * kMaxPoseReach, 0))); // far, fine
+    EXPECT_TRUE(scene.setMobilePose(crate, translation(5, 0, 2)));
     setLogLevel(LogLevel::Info);
     EXPECT_FALSE(scene.setMobilePose(wall, kIdentity)); // not a mobile
     EXPECT_EQ(scene.mobilePose(crate), translation(5, 0, 2));
@@ -650,7 +657,12 @@ TEST(RayScene, BadGeometryIsAClearErrorAndKeepsThePreviousScene) {
         Registry registry; // finite in object space, overflows in world space
         addMesh(registry, quad(0, 0, 1e30f, 1), glm::scale(kIdentity, glm::vec3(1e20f)),
                 Mobility::Static, "bad");
-        expectError(registry, "not finite in world space");
+        expectError(registry, "not finite or lies farther than");
+    }
+    {
+        Registry registry; // finite, but where Embree cannot trace
+        addMesh(registry, quad(0, 0, 1, 1), translation(0, 0, 1e19f), Mobility::Static, "bad");
+        expectError(registry, "lies farther than");
     }
     {
         Registry registry;

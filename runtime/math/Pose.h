@@ -1,0 +1,28 @@
+#pragma once
+// Which world matrices may place a mesh: the one rule the ray scene and the irradiance
+// estimators share, so a pose one refuses the others refuse too.
+
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/matrix.hpp>
+
+#include <cmath>
+
+namespace qgi {
+
+/// Metres: how far from the world origin a pose may put a mesh's origin, and how far a unit
+/// of the mesh may reach (each axis's scale). Ten times the largest scene the importer
+/// accepts; Embree asserts on ray origins past about 1.8e18 m, and float lighting is
+/// meaningless long before. A mobile parked farther away is left where it was, with a warning.
+inline constexpr float kMaxPoseReach = 1e7f;
+
+/// Finite, invertible, and within kMaxPoseReach.
+inline bool isUsablePose(const glm::mat4& m) {
+    for (int c = 0; c < 4; ++c)
+        for (int r = 0; r < 4; ++r)
+            if (!std::isfinite(m[c][r]) || std::abs(m[c][r]) > kMaxPoseReach) return false;
+    const float det = glm::determinant(glm::mat3(m));
+    return std::isfinite(det) && det != 0.f;
+}
+
+} // namespace qgi
