@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/core/Error.h"
+#include "runtime/core/TypeName.h"
 #include "runtime/ecs/TypeId.h"
 
 #include <memory>
@@ -24,7 +25,7 @@ public:
     template <typename T, typename... Args> T& emplace(Args&&... args) {
         const std::size_t id = typeId<T>();
         if (id >= mSlots.size()) mSlots.resize(id + 1);
-        QGI_ASSERT(!mSlots[id], "context already holds a ", typeid(T).name());
+        QGI_ASSERT(!mSlots[id], "context already holds a ", typeName<T>());
         auto holder = std::make_shared<T>(std::forward<Args>(args)...);
         T& ref = *holder;
         mSlots[id] = std::move(holder);
@@ -59,12 +60,12 @@ public:
 
     template <typename T> T& get() {
         T* p = find<T>();
-        QGI_ASSERT(p, "context has no ", typeid(T).name());
+        QGI_ASSERT(p, "context has no ", typeName<T>());
         return *p;
     }
     template <typename T> const T& get() const {
         const T* p = find<T>();
-        QGI_ASSERT(p, "context has no ", typeid(T).name());
+        QGI_ASSERT(p, "context has no ", typeName<T>());
         return *p;
     }
 

@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/core/Error.h"
+#include "runtime/core/TypeName.h"
 #include "runtime/ecs/Context.h"
 #include "runtime/ecs/Entity.h"
 #include "runtime/ecs/Pool.h"
@@ -100,12 +101,12 @@ public:
 
     template <typename T> T& get(Entity e) {
         T* c = tryGet<T>(e);
-        QGI_ASSERT(c, "entity ", e.index, ":", e.generation, " has no ", typeid(T).name());
+        QGI_ASSERT(c, "entity ", e.index, ":", e.generation, " has no ", typeName<T>());
         return *c;
     }
     template <typename T> const T& get(Entity e) const {
         const T* c = tryGet<T>(e);
-        QGI_ASSERT(c, "entity ", e.index, ":", e.generation, " has no ", typeid(T).name());
+        QGI_ASSERT(c, "entity ", e.index, ":", e.generation, " has no ", typeName<T>());
         return *c;
     }
 

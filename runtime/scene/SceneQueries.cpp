@@ -3,8 +3,10 @@
 #include "components/Camera.h"
 #include "components/LightStandIn.h"
 #include "components/Mesh.h"
+#include "components/MobileMesh.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
+#include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/scene/SceneInfo.h"
 
@@ -41,6 +43,29 @@ bool hasLightStandIn(const Registry& registry, Entity surface) {
                               glm::all(glm::lessThanEqual(p, place.max)));
         });
     return found;
+}
+
+SceneInfo describeMeshes(const Registry& registry) {
+    SceneInfo info;
+    info.name = "scene";
+    info.source = "code";
+    registry.view<const Mesh, const WorldTransform>().each(
+        [&](Entity e, const Mesh& mesh, const WorldTransform& world) {
+            if (!registry.has<StaticMesh>(e) && !registry.has<MobileMesh>(e)) return;
+            std::vector<glm::vec3> points(mesh.positions.size());
+            for (std::size_t i = 0; i < points.size(); ++i) {
+                points[i] = glm::vec3(world.matrix * glm::vec4(mesh.positions[i], 1.f));
+                info.bounds.extend(points[i]);
+            }
+            for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3)
+                for (int k = 0; k < 3; ++k) {
+                    const std::uint32_t a = mesh.indices[t + k], b = mesh.indices[t + (k + 1) % 3];
+                    if (a < points.size() && b < points.size())
+                        info.maxEdgeLength =
+                            std::max(info.maxEdgeLength, glm::length(points[a] - points[b]));
+                }
+        });
+    return info;
 }
 
 } // namespace qgi

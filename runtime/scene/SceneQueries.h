@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/ecs/Registry.h"
+#include "runtime/scene/SceneInfo.h"
 
 namespace qgi {
 
@@ -14,5 +15,11 @@ Entity findActiveCamera(const Registry& registry);
 /// stand-in, so nothing else may count it again (photons leaving the surface, probes seeing
 /// its emission). False when `surface` has no Mesh or WorldTransform.
 bool hasLightStandIn(const Registry& registry, Entity surface);
+
+/// A SceneInfo for meshes built in code (the loaders write their own): the world bounds of
+/// every StaticMesh and MobileMesh, and their longest triangle edge as the edge bound (refine
+/// meshes with processMesh first: per-vertex lighting needs vertices where light changes).
+/// Named "scene", source "code", no environment light.
+SceneInfo describeMeshes(const Registry& registry);
 
 } // namespace qgi

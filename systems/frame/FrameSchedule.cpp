@@ -1,17 +1,37 @@
 #include "systems/frame/FrameSchedule.h"
 
+#include "components/MobileMesh.h"
+#include "components/StaticMesh.h"
+#include "runtime/core/Log.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 
 namespace qgi {
 
-FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) {
+FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings)
+    : mRegistry(&registry) {
     if (!registry.ctx().contains<FrameProfiler>()) registry.ctx().emplace<FrameProfiler>();
-    if (!registry.ctx().contains<RayScene>()) {
-        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.raytrace");
-        registry.ctx().emplace<RayScene>().build(registry);
+    // Entities built in code may have a Transform and no WorldTransform yet.
+    mTransform.update(registry, FrameContext{});
+    if (!registry.ctx().contains<SceneInfo>()) {
+        SceneInfo& info = registry.ctx().emplace<SceneInfo>(describeMeshes(registry));
+        logInfo("FrameSchedule: no SceneInfo (the loaders write one); described the meshes: ",
+                "longest edge ", info.maxEdgeLength, " m");
     }
+    {
+        // Rebuilt even when there is one: a new schedule is how meshes added or removed since
+        // the last one get traced (in place, so the Embree device systems hold stays valid).
+        FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.raytrace");
+        RayScene* scene = registry.ctx().find<RayScene>();
+        (scene ? *scene : registry.ctx().emplace<RayScene>()).build(registry);
+    }
+    mMeshes = registry.view<const StaticMesh>().entities();
+    mStaticCount = mMeshes.size();
+    const std::vector<Entity> mobiles = registry.view<const MobileMesh>().entities();
+    mMobileCount = mobiles.size();
+    mMeshes.insert(mMeshes.end(), mobiles.begin(), mobiles.end());
     if (settings.photons) {
         mPhotons = std::make_unique<PhotonUpdateSystem>(*settings.photons);
         DetpSettings irradiance = settings.irradiance;
@@ -71,6 +91,33 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings) 
     if (mRender)
         mSchedule.add("render", "render",
                       [this](Registry& r, const FrameContext& f) { mRender->update(r, f); });
+}
+
+void FrameSchedule::run(Registry& registry, const FrameContext& frame) {
+    QGI_ASSERT(&registry == mRegistry,
+               "FrameSchedule::run was given a Registry other than the one it was built for "
+               "(build a FrameSchedule for each registry)");
+    if (!mWarnedMeshChange) checkMeshesUnchanged(registry);
+    mSchedule.run(registry, frame);
+}
+
+void FrameSchedule::checkMeshesUnchanged(const Registry& registry) {
+    std::string change;
+    for (const Entity e : mMeshes)
+        if (!registry.alive(e)) {
+            change = str("mesh entity ", e.index, " was destroyed");
+            break;
+        }
+    const std::size_t statics = registry.view<const StaticMesh>().sizeHint();
+    const std::size_t mobiles = registry.view<const MobileMesh>().sizeHint();
+    if (change.empty() && (statics != mStaticCount || mobiles != mMobileCount))
+        change = str(statics, " static and ", mobiles, " mobile meshes where there were ",
+                     mStaticCount, " and ", mMobileCount);
+    if (change.empty()) return;
+    mWarnedMeshChange = true;
+    logWarning("FrameSchedule: the scene's meshes changed since it was built (", change,
+               "); lighting keeps tracing and lighting the meshes it was built with until a "
+               "new FrameSchedule is built");
 }
 
 } // namespace qgi

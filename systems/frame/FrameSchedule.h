@@ -13,6 +13,7 @@
 
 #include <memory>
 #include <optional>
+#include <vector>
 
 namespace qgi {
 
@@ -47,15 +48,18 @@ struct FrameSettings {
  *                      mobiles within a per-frame budget
  *    render            uploads dirty ranges, draws, tonemaps
  *
- *  Construction creates the world resources the systems share (RayScene, FrameProfiler,
- *  ProbeVolume when the scene has a SceneInfo)
- *  unless the registry already holds them. Systems never call each other.               */
+ *  Construction (re)builds the world resources the systems share from the registry as it is
+ *  now: the RayScene (rebuilt in place when there is one, keeping its Embree device), the
+ *  ProbeVolume when the scene has a SceneInfo, and a FrameProfiler unless there is one.
+ *  Meshes added or destroyed afterwards are not traced or lit until a new FrameSchedule is
+ *  built; run() says so in a warning, once. Systems never call each other.               */
 class FrameSchedule {
 public:
     FrameSchedule(Registry& registry, const FrameSettings& settings);
 
     Schedule& schedule() { return mSchedule; }
-    void run(Registry& registry, const FrameContext& frame) { mSchedule.run(registry, frame); }
+    /// One frame. `registry` must be the one the schedule was built for (asserted).
+    void run(Registry& registry, const FrameContext& frame);
     RenderSystem* renderer() { return mRender.get(); }
     PhotonUpdateSystem* photons() { return mPhotons.get(); }
     DetpIrradianceSystem* irradiance() { return mIrradiance.get(); }
@@ -63,6 +67,13 @@ public:
     PointCacheSystem* pointCache() { return mPointCache.get(); }
 
 private:
+    /// Warns, once, when mesh entities came or went since construction.
+    void checkMeshesUnchanged(const Registry& registry);
+
+    const Registry* mRegistry = nullptr;
+    std::vector<Entity> mMeshes; ///< StaticMesh and MobileMesh entities at construction
+    std::size_t mStaticCount = 0, mMobileCount = 0;
+    bool mWarnedMeshChange = false;
     Schedule mSchedule;
     AnimationSystem mAnimation;
     TransformSystem mTransform;

@@ -1,0 +1,168 @@
+// FrameSchedule as game code meets it: a scene built in code, a schedule rebuilt after meshes
+// were added, meshes that change under a running schedule, the wrong registry.
+#include "systems/frame/FrameSchedule.h"
+
+#include "components/Avatar.h"
+#include "components/Material.h"
+#include "components/Mesh.h"
+#include "components/MobileMesh.h"
+#include "components/PointLight.h"
+#include "components/ShLighting.h"
+#include "components/StaticMesh.h"
+#include "components/Transform.h"
+#include "components/VertexIrradiance.h"
+#include "runtime/scene/MeshProcessing.h"
+#include "runtime/scene/SceneInfo.h"
+
+#include "test_meshes.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+
+namespace qgi {
+namespace {
+
+using ::testing::HasSubstr;
+
+FrameSettings lightingOnly() {
+    FrameSettings settings;
+    settings.render.reset();
+    settings.photons->photonCount = 20'000;
+    return settings;
+}
+
+/// A mesh entity as game code makes one: Mesh (refined), Material, Transform and a mobility
+/// tag; no WorldTransform.
+Entity addMesh(Registry& registry, const Mesh& mesh, const glm::vec3& at, bool mobile) {
+    const Entity e = registry.create();
+    MeshProcessingOptions refine;
+    refine.maxEdgeLength = 0.25f;
+    registry.emplace<Mesh>(e, processMesh(mesh, refine));
+    registry.emplace<Material>(e, Material{});
+    registry.emplace<Transform>(e, Transform{at});
+    if (mobile)
+        registry.emplace<MobileMesh>(e);
+    else
+        registry.emplace<StaticMesh>(e);
+    return e;
+}
+
+/// A 2 x 2 m floor under a lamp; the table, when asked for, stands on it under the lamp.
+struct Room {
+    Registry registry;
+    Entity floor, lamp, table;
+
+    Room() {
+        floor = addMesh(registry,
+                        test::gridMesh({-1.f, 0.f, -1.f}, {0.f, 0.f, 2.f}, {2.f, 0.f, 0.f}, 1),
+                        glm::vec3(0.f), false);
+        lamp = registry.create();
+        registry.emplace<Transform>(lamp, Transform{{0.f, 1.5f, 0.f}});
+        registry.emplace<PointLight>(lamp, PointLight{glm::vec3(1.f), 5.f});
+    }
+    void addTable() {
+        table = addMesh(registry, test::boxMesh({0.3f, 0.02f, 0.3f}), {0.f, 0.5f, 0.f}, true);
+    }
+    const std::vector<glm::vec3>& floorLight() const {
+        return registry.get<VertexIrradiance>(floor).irradiance;
+    }
+};
+
+void runFrames(FrameSchedule& frame, Registry& registry, int frames) {
+    for (int f = 0; f < frames; ++f) {
+        frame.run(registry, FrameContext{std::uint64_t(f), f / 60.0, 1.f / 60.f, 0});
+        registry.clearChanges();
+    }
+}
+
+TEST(FrameSchedule, LightsASceneBuiltInCodeWithoutWorldTransformsOrSceneInfo) {
+    Room room;
+    room.addTable();
+    const Entity avatar =
+        addMesh(room.registry, test::boxMesh(glm::vec3(0.1f)), {0.6f, 0.1f, 0.f}, false);
+    room.registry.remove<StaticMesh>(avatar);
+    room.registry.emplace<Avatar>(avatar, Avatar{0.1f});
+    FrameSchedule frame(room.registry, lightingOnly());
+    runFrames(frame, room.registry, 2);
+
+    const SceneInfo& info = room.registry.ctx().get<SceneInfo>();
+    EXPECT_EQ(info.source, "code");
+    EXPECT_FLOAT_EQ(info.bounds.min.x, -1.f);
+    EXPECT_FLOAT_EQ(info.bounds.max.x, 1.f);
+    EXPECT_LE(info.maxEdgeLength, 0.25f * 1.0001f);
+    EXPECT_GT(info.maxEdgeLength, 0.f);
+    // The floor is lit (finite, not negative), and so is the avatar.
+    const auto& floor = room.floorLight();
+    ASSERT_FALSE(floor.empty());
+    for (const glm::vec3& e : floor)
+        ASSERT_TRUE(std::isfinite(e.x) && e.x >= 0.f);
+    float total = 0.f;
+    for (const glm::vec3& e : floor)
+        total += e.x;
+    EXPECT_GT(total, 0.f);
+    const ShLighting* sh = room.registry.tryGet<ShLighting>(avatar);
+    ASSERT_NE(sh, nullptr);
+    EXPECT_GT(sh->coefficients[0].x, 0.f);
+}
+
+TEST(FrameSchedule, ANewScheduleTracesMeshesAddedSinceTheLastOne) {
+    // The table added after the first schedule shadows the floor once a new schedule is built,
+    // exactly as in a room that had it from the start.
+    Room grown;
+    {
+        FrameSchedule first(grown.registry, lightingOnly());
+        runFrames(first, grown.registry, 1);
+    }
+    grown.addTable();
+    FrameSchedule second(grown.registry, lightingOnly());
+    runFrames(second, grown.registry, 1);
+
+    Room fresh;
+    fresh.addTable();
+    FrameSchedule only(fresh.registry, lightingOnly());
+    runFrames(only, fresh.registry, 1);
+
+    ASSERT_EQ(grown.floorLight().size(), fresh.floorLight().size());
+    EXPECT_EQ(std::memcmp(grown.floorLight().data(), fresh.floorLight().data(),
+                          fresh.floorLight().size() * sizeof(glm::vec3)),
+              0);
+}
+
+TEST(FrameSchedule, MeshesThatComeOrGoUnderARunningScheduleAreNamedOnce) {
+    Room room;
+    room.addTable();
+    FrameSchedule frame(room.registry, lightingOnly());
+    runFrames(frame, room.registry, 1);
+    ::testing::internal::CaptureStderr();
+    runFrames(frame, room.registry, 1);
+    EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+
+    room.registry.destroy(room.table);
+    ::testing::internal::CaptureStderr();
+    runFrames(frame, room.registry, 3);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_THAT(log, HasSubstr("was destroyed"));
+    EXPECT_THAT(log, HasSubstr("new FrameSchedule"));
+    EXPECT_EQ(log.find("FrameSchedule:"), log.rfind("FrameSchedule:")) << log;
+
+    Room other;
+    FrameSchedule added(other.registry, lightingOnly());
+    other.addTable();
+    ::testing::internal::CaptureStderr();
+    runFrames(added, other.registry, 1);
+    EXPECT_THAT(::testing::internal::GetCapturedStderr(),
+                HasSubstr("1 mobile meshes where there were"));
+}
+
+TEST(FrameScheduleDeathTest, RunningAnotherRegistryNamesTheMistake) {
+    Room room, other;
+    FrameSchedule frame(room.registry, lightingOnly());
+    EXPECT_DEATH(frame.run(other.registry, FrameContext{}), "other than the one it was built for");
+}
+
+} // namespace
+} // namespace qgi
