@@ -1,7 +1,10 @@
 #include "systems/frame/FrameSchedule.h"
 
+#include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/StaticMesh.h"
+#include "components/Transform.h"
 #include "runtime/core/Log.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
@@ -97,11 +100,35 @@ void FrameSchedule::run(Registry& registry, const FrameContext& frame) {
     QGI_ASSERT(&registry == mRegistry,
                "FrameSchedule::run was given a Registry other than the one it was built for "
                "(build a FrameSchedule for each registry)");
-    if (!mWarnedMeshChange) checkMeshesUnchanged(registry);
+    checkMeshesUnchanged(registry);
     mSchedule.run(registry, frame);
 }
 
 void FrameSchedule::checkMeshesUnchanged(const Registry& registry) {
+    // Game code's changes since the last frame (the first frame's are the scene's creation).
+    if (mFramesRun++ > 0 && !mWarnedStaticEdit) {
+        const auto named = [&](Entity e) {
+            const Name* name = registry.tryGet<Name>(e);
+            return name ? str("'", name->value, "'") : str("entity ", e.index);
+        };
+        std::string edit;
+        for (const Entity e : registry.changed<Transform>())
+            if (registry.has<StaticMesh>(e)) {
+                edit =
+                    str("static mesh ", named(e), " moved; a mesh that moves must be a MobileMesh");
+                break;
+            }
+        for (const Entity e : registry.changed<Mesh>())
+            if (edit.empty() && (registry.has<StaticMesh>(e) || registry.has<MobileMesh>(e)))
+                edit = str("the Mesh of ", named(e), " changed");
+        if (!edit.empty()) {
+            mWarnedStaticEdit = true;
+            logWarning("FrameSchedule: ", edit,
+                       "; lighting keeps what the schedule was built "
+                       "with until a new FrameSchedule is built");
+        }
+    }
+    if (mWarnedMeshChange) return;
     std::string change;
     for (const Entity e : mMeshes)
         if (!registry.alive(e)) {

@@ -67,13 +67,15 @@ public:
     PointCacheSystem* pointCache() { return mPointCache.get(); }
 
 private:
-    /// Warns, once, when mesh entities came or went since construction.
+    /// Warns, once each, when mesh entities came or went since construction, and when game
+    /// code moved a static mesh or edited a Mesh: changes the lighting does not follow.
     void checkMeshesUnchanged(const Registry& registry);
 
     const Registry* mRegistry = nullptr;
     std::vector<Entity> mMeshes; ///< StaticMesh and MobileMesh entities at construction
     std::size_t mStaticCount = 0, mMobileCount = 0;
-    bool mWarnedMeshChange = false;
+    bool mWarnedMeshChange = false, mWarnedStaticEdit = false;
+    std::uint64_t mFramesRun = 0;
     Schedule mSchedule;
     AnimationSystem mAnimation;
     TransformSystem mTransform;

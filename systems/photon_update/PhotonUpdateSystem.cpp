@@ -441,7 +441,13 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     registry.view<const Mesh>().each([&](Entity e, const Mesh&) {
         if (!isTraced(registry, e)) return;
         if (e.index >= mAlbedo.size()) mAlbedo.resize(e.index + 1, glm::vec3(0.f));
-        mAlbedo[e.index] = albedoOf(registry.tryGet<Material>(e));
+        const Material* material = registry.tryGet<Material>(e);
+        mAlbedo[e.index] = albedoOf(material);
+        if (material && mAlbedo[e.index] != material->baseColor) // NaN never compares equal
+            logWarning("photons: Material.baseColor of ", nameOf(registry, e), " is (",
+                       material->baseColor.x, ", ", material->baseColor.y, ", ",
+                       material->baseColor.z, "), not an albedo in [0, 1]; photons reflect (",
+                       mAlbedo[e.index].x, ", ", mAlbedo[e.index].y, ", ", mAlbedo[e.index].z, ")");
     });
 
     store.lights.clear();

@@ -6,6 +6,7 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/ShLighting.h"
 #include "components/StaticMesh.h"
@@ -156,6 +157,38 @@ TEST(FrameSchedule, MeshesThatComeOrGoUnderARunningScheduleAreNamedOnce) {
     runFrames(added, other.registry, 1);
     EXPECT_THAT(::testing::internal::GetCapturedStderr(),
                 HasSubstr("1 mobile meshes where there were"));
+}
+
+TEST(FrameSchedule, MovingAStaticMeshOrEditingAMeshIsNamedOnce) {
+    {
+        Room room;
+        room.registry.emplace<Name>(room.floor, "floor");
+        FrameSchedule frame(room.registry, lightingOnly());
+        runFrames(frame, room.registry, 1);
+        ::testing::internal::CaptureStderr();
+        for (int i = 0; i < 3; ++i) {
+            room.registry.patch<Transform>(room.floor).translation.y += 0.1f;
+            runFrames(frame, room.registry, 1);
+        }
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_THAT(log, HasSubstr("static mesh 'floor' moved"));
+        EXPECT_THAT(log, HasSubstr("MobileMesh"));
+        EXPECT_EQ(log.find("FrameSchedule:"), log.rfind("FrameSchedule:")) << log;
+    }
+    {
+        Room room;
+        room.addTable();
+        FrameSchedule frame(room.registry, lightingOnly());
+        runFrames(frame, room.registry, 1);
+        ::testing::internal::CaptureStderr();
+        room.registry.patch<Transform>(room.table).translation.x += 0.1f; // mobiles may move
+        runFrames(frame, room.registry, 1);
+        EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+        ::testing::internal::CaptureStderr();
+        room.registry.patch<Mesh>(room.table).positions[0].y += 0.01f;
+        runFrames(frame, room.registry, 1);
+        EXPECT_THAT(::testing::internal::GetCapturedStderr(), HasSubstr("the Mesh of entity"));
+    }
 }
 
 TEST(FrameScheduleDeathTest, RunningAnotherRegistryNamesTheMistake) {

@@ -834,6 +834,22 @@ TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCo
     }
 }
 
+TEST(PhotonUpdate, AnAlbedoOutsideZeroToOneIsClampedAndNamed) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    registry.get<Material>(room.cube).baseColor = {1.5f, 0.5f, -0.2f};
+    registry.get<Material>(room.crate).baseColor.y = std::numeric_limits<float>::quiet_NaN();
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(1'000));
+    ::testing::internal::CaptureStderr();
+    firstUpdate(registry, system);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_THAT(log, HasSubstr("baseColor of 'cube' is (1.5, 0.5, -0.2), not an albedo in [0, 1]; "
+                               "photons reflect (1, 0.5, 0)"));
+    EXPECT_THAT(log, HasSubstr("baseColor of 'crate'"));
+    EXPECT_EQ(log.find("'walls'"), std::string::npos) << log;
+}
+
 // ---- settings ------------------------------------------------------------------------------
 
 TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
