@@ -19,10 +19,9 @@
 #include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
+#include "systems/transform/TransformSystem.h"
 
 #include <glm/common.hpp>
-#include <glm/gtc/matrix_transform.hpp>
-#include <glm/gtc/quaternion.hpp>
 #include <glm/matrix.hpp>
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_for.h>
@@ -80,7 +79,6 @@ Aabb sweepAlong(const PathFollower& path, const glm::vec3& scale, const Aabb& bo
     const glm::vec3 s = glm::abs(scale);
     const float reach =
         std::max({s.x, s.y, s.z}) * (glm::length(box.center()) + 0.5f * glm::length(box.extent()));
-    const glm::mat4 scaling = glm::scale(glm::mat4(1.f), scale);
     Aabb sweep;
     const auto extend = [&](const Aabb& b) {
         sweep.extend(b.min);
@@ -88,8 +86,8 @@ Aabb sweepAlong(const PathFollower& path, const glm::vec3& scale, const Aabb& bo
     };
     const std::vector<PathKey>& keys = path.keys;
     for (std::size_t k = 0; k < keys.size(); ++k) {
-        extend(transformBox(box, glm::translate(glm::mat4(1.f), keys[k].position) *
-                                     glm::mat4_cast(keys[k].rotation) * scaling));
+        extend(
+            transformBox(box, localMatrix(Transform{keys[k].position, keys[k].rotation, scale})));
         // (A looping path jumps from its last key back to its first: nothing lies between.)
         if (k + 1 == keys.size() || keys[k + 1].rotation == keys[k].rotation) continue;
         for (const PathKey* key : {&keys[k], &keys[k + 1]})
@@ -119,9 +117,7 @@ Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds)
             box = sweepAlong(*path, local->scale, box);
             scripted = true;
         } else {
-            box = transformBox(box, glm::translate(glm::mat4(1.f), local->translation) *
-                                        glm::mat4_cast(local->rotation) *
-                                        glm::scale(glm::mat4(1.f), local->scale));
+            box = transformBox(box, localMatrix(*local));
         }
         e = local->parent;
     }

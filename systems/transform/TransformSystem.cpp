@@ -1,11 +1,14 @@
 #include "systems/transform/TransformSystem.h"
 
+#include "components/Name.h"
 #include "components/Transform.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Log.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
 
+#include <optional>
 #include <vector>
 
 namespace qgi {
@@ -17,9 +20,12 @@ glm::mat4 localMatrix(const Transform& t) {
 
 namespace {
 
+/// Parent links followed at most: far deeper than any real hierarchy.
+constexpr int kMaxDepth = 256;
+
 // True when e or one of its ancestors had its Transform changed this frame.
 bool chainChanged(const Registry& registry, Entity e) {
-    for (int depth = 0; e && depth < 256; ++depth) {
+    for (int depth = 0; e && depth < kMaxDepth; ++depth) {
         if (registry.wasChanged<Transform>(e)) return true;
         const Transform* t = registry.tryGet<Transform>(e);
         if (!t) return false;
@@ -28,17 +34,18 @@ bool chainChanged(const Registry& registry, Entity e) {
     return false;
 }
 
-glm::mat4 worldMatrix(const Registry& registry, Entity e) {
+/// The entity's world matrix; nullopt when its parent chain does not end within kMaxDepth
+/// links (a loop: the importer rejects them, game code can make one).
+std::optional<glm::mat4> worldMatrix(const Registry& registry, Entity e) {
     glm::mat4 m(1.f);
-    // Parents are few levels deep in practice; the importer rejects cycles, the depth cap
-    // keeps a bug from hanging the frame.
-    for (int depth = 0; e && depth < 256; ++depth) {
+    for (int depth = 0; depth < kMaxDepth; ++depth) {
+        if (!e) return m;
         const Transform* t = registry.tryGet<Transform>(e);
-        if (!t) break;
+        if (!t) return m;
         m = localMatrix(*t) * m;
         e = t->parent;
     }
-    return m;
+    return std::nullopt;
 }
 
 } // namespace
@@ -47,8 +54,20 @@ void TransformSystem::update(Registry& registry, const FrameContext& /*frame*/) 
     if (registry.changed<Transform>().empty()) return; // a still scene costs nothing
 
     std::vector<std::pair<Entity, glm::mat4>> updates;
-    registry.view<const Transform>().each([&](Entity e, const Transform&) {
-        if (chainChanged(registry, e)) updates.emplace_back(e, worldMatrix(registry, e));
+    registry.view<const Transform>().each([&](Entity e, const Transform& local) {
+        if (!chainChanged(registry, e)) return;
+        if (const std::optional<glm::mat4> world = worldMatrix(registry, e)) {
+            updates.emplace_back(e, *world);
+            return;
+        }
+        // Placed as a root until the loop is broken.
+        updates.emplace_back(e, localMatrix(local));
+        if (mWarnedLoop) return;
+        mWarnedLoop = true;
+        const Name* name = registry.tryGet<Name>(e);
+        logWarning("TransformSystem: the parent chain of ",
+                   name ? str("'", name->value, "'") : str("entity ", e.index),
+                   " loops (or runs past ", kMaxDepth, " parents); it is placed as a root");
     });
     for (const auto& [e, m] : updates) {
         if (WorldTransform* w = registry.tryGet<WorldTransform>(e)) {

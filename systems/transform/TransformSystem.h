@@ -16,11 +16,15 @@ glm::mat4 localMatrix(const Transform& t);
  *  Only entities whose Transform (or an ancestor's) changed this frame are recomputed, and
  *  their WorldTransform is patched only when the matrix actually changes, so
  *  `registry.changed<WorldTransform>()` is exactly the set of entities that moved.
- *  Reads:  const Transform (and its change list)
+ *  An entity whose parent chain loops is placed as a root (its local matrix), with a warning.
+ *  Reads:  const Transform (and its change list), const Name
  *  Writes: WorldTransform (emplaced when missing)                                          */
 class TransformSystem {
 public:
     void update(Registry& registry, const FrameContext& frame);
+
+private:
+    bool mWarnedLoop = false; ///< a parent loop is named once
 };
 
 } // namespace qgi
