@@ -53,6 +53,10 @@ void DetpIrradianceSystem::build(Registry& registry) {
         for (const float a : receivers.triangleAreas())
             area += double(a);
         radius = defaultDiscRadius(*info, area, mSettings.photonCount);
+    } else if (const SceneInfo* info = registry.ctx().find<SceneInfo>();
+               info && !info->bounds.empty() && radius > glm::length(info->bounds.extent())) {
+        fail("DETP: DetpSettings.discRadius = ", radius, " m is wider than the whole scene (",
+             glm::length(info->bounds.extent()), " m across): every disc would average all of it");
     }
     auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
     const std::uint32_t staticCount = receivers.staticVertexCount();

@@ -16,6 +16,13 @@ namespace qgi {
 FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings)
     : mRegistry(&registry) {
     if (!registry.ctx().contains<FrameProfiler>()) registry.ctx().emplace<FrameProfiler>();
+    // Photon and hybrid mode split the light differently: every part must agree on which.
+    const bool hybrid = settings.irradiance.hybrid;
+    if ((settings.probes && settings.probes->hybrid != hybrid) ||
+        (settings.render && (settings.render->mode == ShadingMode::Hybrid) != hybrid))
+        logWarning("FrameSettings: irradiance.hybrid is ", hybrid ? "on" : "off",
+                   " but probes.hybrid or render.mode says otherwise: light will be counted "
+                   "twice or not at all");
     // Entities built in code may have a Transform and no WorldTransform yet.
     mTransform.update(registry, FrameContext{});
     if (!registry.ctx().contains<SceneInfo>()) {

@@ -17,6 +17,9 @@
 
 namespace qgi {
 
+/// What the frame runs. Photon mode by default (all light from photons); for hybrid mode
+/// (direct light in the shader) set irradiance.hybrid, probes->hybrid and render->mode alike:
+/// the schedule warns when they disagree.
 struct FrameSettings {
     /// Photon transport and per-vertex irradiance; off: no global illumination (direct only).
     std::optional<PhotonSettings> photons = PhotonSettings{};
@@ -28,7 +31,7 @@ struct FrameSettings {
     /// surfaces tagged PointCacheShaded); off unless set. Built (or loaded) at construction.
     std::optional<PointCacheSettings> pointCache;
     /// Draw with the renderer (needs a current GL 4.5 context); off for lighting-only runs.
-    std::optional<RenderSettings> render = RenderSettings{};
+    std::optional<RenderSettings> render = RenderSettings{.mode = ShadingMode::Photon};
     /// Virtual Light Field of the static scene for glossy and mirror surfaces: baked (or
     /// loaded from its cache) at construction, looked up by the renderer; off by default.
     std::optional<VlfSystemSettings> vlf;

@@ -1075,9 +1075,25 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     addUnitFloor(registry, 2);
     DetpIrradianceSystem system(DetpSettings{});
     EXPECT_THROW(system.build(registry), Error); // radius 0 and no SceneInfo
-    registry.ctx().emplace<SceneInfo>().maxEdgeLength = 0.35f;
+    SceneInfo& described = registry.ctx().emplace<SceneInfo>();
+    described.maxEdgeLength = 0.35f;
     system.build(registry);
     EXPECT_FLOAT_EQ(system.discRadius(), 0.175f);
+
+    // A radius wider than the scene (the unit floor: 1.41 m across) is a mistake.
+    described.bounds = {glm::vec3(0.f), {1.f, 0.f, 1.f}};
+    DetpSettings wide;
+    wide.discRadius = 1.5f;
+    DetpIrradianceSystem tooWide(wide);
+    try {
+        tooWide.build(registry);
+        ADD_FAILURE() << "a 1.5 m disc over a 1.41 m scene was accepted";
+    } catch (const Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("wider than the whole scene"));
+    }
+    wide.discRadius = 1.4f;
+    DetpIrradianceSystem wideEnough(wide);
+    EXPECT_NO_THROW(wideEnough.build(registry));
 }
 
 TEST(Detp, RejectsMeshesItCannotUse) {

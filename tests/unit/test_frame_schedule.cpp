@@ -198,6 +198,24 @@ TEST(FrameSchedule, MovingAStaticMeshOrEditingAMeshIsNamedOnce) {
              "the Mesh of entity"));
 }
 
+TEST(FrameSchedule, PhotonAndHybridModeSettingsMustAgree) {
+    const FrameSettings defaults;
+    EXPECT_FALSE(defaults.irradiance.hybrid);
+    EXPECT_FALSE(defaults.probes->hybrid);
+    EXPECT_EQ(defaults.render->mode, ShadingMode::Photon);
+
+    Room room;
+    ::testing::internal::CaptureStderr();
+    { FrameSchedule agreeing(room.registry, lightingOnly()); }
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(log.find("hybrid is"), std::string::npos) << log;
+    FrameSettings mixed = lightingOnly();
+    mixed.irradiance.hybrid = true; // the probes still count direct light from photons
+    ::testing::internal::CaptureStderr();
+    { FrameSchedule disagreeing(room.registry, mixed); }
+    EXPECT_TRUE(once(::testing::internal::GetCapturedStderr(), "irradiance.hybrid is on"));
+}
+
 TEST(FrameScheduleDeathTest, RunningAnotherRegistryNamesTheMistake) {
     Room room, other;
     FrameSchedule frame(room.registry, lightingOnly());
