@@ -29,6 +29,12 @@ constexpr std::size_t kVertexGrain = 256;
 /// Candidate paths per task when listing the segments that reach a moved mobile's discs.
 constexpr std::size_t kPathGrain = 2048;
 
+/// The float a vertex publishes for a sum of signed additions: incremental updates that
+/// cancel exactly can leave a rounding error below zero, and irradiance is never negative.
+glm::vec3 published(const glm::dvec3& irradiance) {
+    return glm::vec3(glm::max(irradiance, glm::dvec3(0.0)));
+}
+
 } // namespace
 
 DetpIrradianceSystem::DetpIrradianceSystem(const DetpSettings& settings) : mSettings(settings) {
@@ -286,7 +292,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
                         mSegmentList, {}, 1.0, false);
         const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
         for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
-            mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+            mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
     }
 }
 
@@ -356,7 +362,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         listCountedSegments(store, mSegmentList);
         accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
         for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
-            mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+            mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
         mAllMobiles.clear();
         for (std::uint32_t r = 0; r < receivers.size(); ++r)
             if (receivers[r].mobile) mAllMobiles.push_back(r);
@@ -399,7 +405,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     }
     for (const std::uint32_t v : mTouched) {
         mIsTouched[v] = 0;
-        mIrradiance[v] = glm::vec3(mPowerSum[v] * toIrradiance);
+        mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
     }
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);

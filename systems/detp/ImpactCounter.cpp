@@ -104,7 +104,8 @@ glm::vec3 ImpactCounter::irradiance(std::uint32_t vertex) const {
     glm::dvec3 power(0.0);
     for (std::uint32_t i = mRingStart[vertex]; i < mRingStart[vertex + 1]; ++i)
         power += mTrianglePower[mRingTriangles[i]];
-    return glm::vec3(power / mRingArea[vertex]);
+    // Additions and subtractions that cancel can leave a rounding error below zero.
+    return glm::vec3(glm::max(power / mRingArea[vertex], glm::dvec3(0.0)));
 }
 
 } // namespace qgi

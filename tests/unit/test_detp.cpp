@@ -656,6 +656,55 @@ TEST(Detp, DriftPolicySchedulesAFullReestimate) {
     EXPECT_EQ(fullFrames, (std::vector<int>{26, 52}));
 }
 
+TEST(Detp, IncrementalSumsThatCancelNeverPublishNegativeIrradiance) {
+    // A bright and a faint photon land on the floor's centre vertex: in double, 1e8 + 1e-9 is
+    // 1e8. Taking the bright one away, then the faint one, leaves -1e-9 where the exact sum is
+    // 0. Irradiance is never negative: the vertex publishes 0.
+    Registry registry;
+    addDetpResources(registry);
+    const Entity floor = addUnitFloor(registry, 20);
+    const glm::vec3 centre(0.5f, 0.f, 0.5f);
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    const auto landing = [&](float power) {
+        return Segment{centre + glm::vec3(0.f, 1.f, 0.f),
+                       {0.f, -1.f, 0.f},
+                       1.f,
+                       glm::vec3(power),
+                       floor,
+                       0,
+                       0};
+    };
+    for (const float power : {1e8f, 1e-9f}) {
+        const Segment path[1] = {landing(power)};
+        appendPath(store, path);
+    }
+    DetpSettings settings;
+    settings.discRadius = 0.03f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    const std::uint32_t v = 10 * 21 + 10; // the centre vertex
+    EXPECT_GT(irradiance(registry, floor).irradiance[v].x, 0.f);
+    for (std::uint32_t p = 0; p < 2; ++p) { // each path now leaves straight up instead
+        PhotonDelta& delta = registry.ctx().get<PhotonDelta>();
+        delta = PhotonDelta{};
+        delta.sequence = p + 1;
+        delta.paths = {p};
+        push(delta.oldSegments, landing(p == 0 ? 1e8f : 1e-9f));
+        const Segment away{
+            centre + glm::vec3(0.f, 1.f, 0.f), {0.f, 1.f, 0.f}, kInf, glm::vec3(1.f), {}, 0, 0};
+        push(delta.newSegments, away);
+        delta.oldFirst = {0, 1};
+        delta.newFirst = {0, 1};
+        store.segments.direction[p] = away.direction;
+        store.segments.length[p] = kInf;
+        store.segments.hitEntity[p] = Entity{};
+        system.update(registry, {});
+        ASSERT_FALSE(system.lastFrame().full);
+    }
+    EXPECT_EQ(irradiance(registry, floor).irradiance[v], glm::vec3(0.f));
+}
+
 TEST(Detp, EachDeltaIsAppliedOnceAndAMissedOneForcesAFullEstimate) {
     IncrementalWorld world;
     Registry& registry = world.registry;
