@@ -6,6 +6,7 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/ShLighting.h"
 #include "components/SpotLight.h"
@@ -624,9 +625,24 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
     }
     mStats.visibilityCells += mPendingCells.size();
 
+    // Past the outer probes an avatar takes the nearest ones' light: say so, once per avatar.
+    const glm::vec3 low = grid.origin - grid.spacing;
+    const glm::vec3 high = grid.origin + grid.spacing * glm::vec3(grid.counts);
     registry.view<const Avatar, const WorldTransform, ShLighting>().each(
-        [&](const Avatar&, const WorldTransform& world, ShLighting& lighting) {
+        [&](Entity e, const Avatar&, const WorldTransform& world, ShLighting& lighting) {
             const glm::vec3 p(world.matrix[3]);
+            if (glm::any(glm::lessThan(p, low)) || glm::any(glm::greaterThan(p, high))) {
+                ++mStats.outside;
+                if (std::find(mWarnedOutside.begin(), mWarnedOutside.end(), e) ==
+                    mWarnedOutside.end()) {
+                    mWarnedOutside.push_back(e);
+                    const Name* name = registry.tryGet<Name>(e);
+                    logWarning("SH probes: avatar ",
+                               name ? str("'", name->value, "'") : str("entity ", e.index),
+                               " is outside the probe volume; it takes the light of the nearest "
+                               "probes");
+                }
+            }
             ProbeBlend blend;
             if (!isFinite(p) || !volume.interpolate(p, lighting.coefficients, &blend)) {
                 ++mStats.unlit; // left as it was

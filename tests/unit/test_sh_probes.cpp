@@ -5,11 +5,12 @@
 #include "systems/sh_probes/ProbeVolume.h"
 #include "systems/sh_probes/ShProbeSystem.h"
 
-#include "components/LightStandIn.h"
 #include "components/Avatar.h"
 #include "components/DirectionalLight.h"
-#include "components/SpotLight.h"
+#include "components/LightStandIn.h"
+#include "components/Name.h"
 #include "components/ShLighting.h"
+#include "components/SpotLight.h"
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Finite.h"
@@ -491,6 +492,25 @@ TEST(ShProbes, AvatarInTheDarkRoomStaysDark) {
     for (int c = 0; c < 8; ++c)
         litCorners += shNorm(volume.coefficients(volume.grid().cornerProbe(cell, c)));
     EXPECT_GT(litCorners, 0.0);
+}
+
+TEST(ShProbes, AnAvatarOutsideTheVolumeIsNamedOnce) {
+    TwoRooms rooms;
+    const ProbeGrid& grid = rooms.world.ctx().get<ProbeVolume>().grid();
+    const glm::vec3 last = grid.origin + grid.spacing * glm::vec3(grid.counts - 1);
+    const Entity inside = addAvatar(rooms.world, 0.5f * (grid.origin + last));
+    const Entity edge = addAvatar(rooms.world, last + 0.5f * grid.spacing); // within a step
+    const Entity away = addAvatar(rooms.world, last + glm::vec3(100.f, 0.f, 0.f));
+    rooms.world.emplace<Name>(away, "wanderer");
+    ::testing::internal::CaptureStderr();
+    rooms.system.update(rooms.world, FrameContext{1});
+    rooms.system.update(rooms.world, FrameContext{2});
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(rooms.system.lastFrame().outside, 1u);
+    const std::string named = "avatar 'wanderer' is outside the probe volume";
+    EXPECT_NE(log.find(named), std::string::npos) << log;
+    EXPECT_EQ(log.find(named), log.rfind(named)) << log;
+    EXPECT_TRUE(rooms.world.has<ShLighting>(inside) && rooms.world.has<ShLighting>(edge));
 }
 
 TEST(ShProbes, InterpolationIsContinuousAcrossCells) {
