@@ -208,7 +208,8 @@ void RayScene::build(const Registry& registry) {
                       newScene(mSettings.buildQuality, RTC_SCENE_FLAG_NONE),
                       {},
                       checked.world,
-                      glm::transpose(glm::inverse(glm::mat3(checked.world)))};
+                      glm::transpose(glm::inverse(glm::mat3(checked.world))),
+                      describe(registry, e, "MobileMesh")};
         const GeometryHandle geometry =
             newTriangles(device, checked.mesh, glm::mat4(1.f), describe(registry, e, "MobileMesh"));
         rtcAttachGeometryByID(mobile.scene.get(), geometry.get(), 0);
@@ -236,9 +237,10 @@ void RayScene::build(const Registry& registry) {
 
 bool RayScene::placeMobile(Mobile& mobile, const glm::mat4& pose) {
     if (!isUsablePose(pose)) {
-        logWarning("RayScene: ignoring a pose for mobile entity ", mobile.entity.index,
-                   " that is not finite and invertible or reaches past ", kMaxPoseReach,
-                   " m; it stays where it was");
+        logWarning(mobile.who,
+                   ": ignoring a pose that is not finite and invertible or reaches "
+                   "past ",
+                   kMaxPoseReach, " m; it stays where it was");
         return false;
     }
     rtcSetGeometryTransform(mobile.instance.get(), 0, RTC_FORMAT_FLOAT4X4_COLUMN_MAJOR,

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -121,6 +122,7 @@ private:
         GeometryHandle instance;     ///< in the top level, instance ID = index + 1
         glm::mat4 pose{1.f};         ///< object to world
         glm::mat3 normalMatrix{1.f}; ///< inverse transpose of pose's linear part
+        std::string who;             ///< "RayScene: MobileMesh entity N 'name'", for warnings
     };
     struct FilterContext; // RTCIntersectContext plus the accept function
 

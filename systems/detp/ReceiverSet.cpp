@@ -7,6 +7,7 @@
 #include "components/VertexIrradiance.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/math/Pose.h"
 
@@ -87,6 +88,27 @@ bool tangentPlanesSupport(std::span<const glm::vec3> positions,
     return true;
 }
 
+/// A mesh whose vertex normals point against the winding of most of its triangles was most
+/// likely exported with flipped normals: its discs face away from the side its faces show,
+/// so it reads dark. Named in a warning (the normals are used as they are).
+void warnIfNormalsOppose(const Registry& registry, Entity e, bool mobile, const Mesh& mesh) {
+    std::size_t faces = 0, opposed = 0;
+    for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+        const std::uint32_t a = mesh.indices[t], b = mesh.indices[t + 1], c = mesh.indices[t + 2];
+        const glm::vec3 n = glm::cross(mesh.positions[b] - mesh.positions[a],
+                                       mesh.positions[c] - mesh.positions[a]);
+        const float side = glm::dot(n, mesh.normals[a] + mesh.normals[b] + mesh.normals[c]);
+        if (side == 0.f || !std::isfinite(side)) continue;
+        ++faces;
+        opposed += side < 0.f ? 1 : 0;
+    }
+    if (2 * opposed > faces)
+        logWarning(describe(registry, e, mobile), ": Mesh.normals point against the winding of ",
+                   opposed, " of its ", faces,
+                   " triangles (flipped normals?); its vertices are "
+                   "lit from the side the normals face");
+}
+
 } // namespace
 
 void ReceiverSet::build(Registry& registry) {
@@ -115,6 +137,7 @@ void ReceiverSet::build(Registry& registry) {
             receiver.firstTriangle = std::uint32_t(set.mTriangles.size());
             receiver.triangleCount = std::uint32_t(mesh.indices.size() / 3);
             receiver.convex = mobile && tangentPlanesSupport(mesh.positions, mesh.normals);
+            warnIfNormalsOppose(registry, e, mobile, mesh);
             if (!mobile) set.mStaticVertexCount += receiver.vertexCount;
             set.mPositions.insert(set.mPositions.end(), mesh.positions.begin(),
                                   mesh.positions.end());

@@ -1145,6 +1145,28 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     EXPECT_NO_THROW(wideEnough.build(registry));
 }
 
+TEST(Detp, FlippedNormalsAreNamed) {
+    // A floor wound to face up whose normals point down reads dark from above: a warning
+    // names it. The same floor with its normals right says nothing.
+    for (const bool flipped : {false, true}) {
+        Registry registry;
+        addDetpResources(registry);
+        Mesh floor = gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 4);
+        if (flipped)
+            for (glm::vec3& n : floor.normals)
+                n = -n;
+        addReceiverMesh(registry, std::move(floor), kIdentity, false, "floor");
+        DetpSettings settings;
+        settings.discRadius = 0.1f;
+        DetpIrradianceSystem system(settings);
+        ::testing::internal::CaptureStderr();
+        system.build(registry);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        const std::string named = "'floor': Mesh.normals point against the winding of 32 of its 32";
+        EXPECT_EQ(log.find(named) != std::string::npos, flipped) << log;
+    }
+}
+
 TEST(Detp, RejectsMeshesItCannotUse) {
     const auto buildError = [](Mesh mesh) {
         Registry registry;
