@@ -476,6 +476,14 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     grid.build(store, mSceneBox, mSettings.gridResolution);
     mStats.tracedSegments = store.segments.size();
     mStats.reindexedPaths = store.paths.size();
+    if (!mLoggedShot) { // --full-recompute shoots every frame: once is enough
+        mLoggedShot = true;
+        constexpr double kMiB = 1024.0 * 1024.0;
+        logInfo("photons: ", store.paths.size(), " from ", mEmitters.size(), " lights, ",
+                store.segments.size(), " segments: store ",
+                double(store.segments.size() * PhotonSegments::kBytesPerSegment) / kMiB,
+                " MiB, path grid ", double(grid.memoryBytes()) / kMiB, " MiB");
+    }
 }
 
 void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RayScene& scene,

@@ -192,6 +192,7 @@ private:
     PhotonSettings mSettings;
     PhotonTracer mTracer;
     bool mShot = false;
+    bool mLoggedShot = false; ///< the first shot's size was logged
     Aabb mSceneBox;       ///< every mesh at the first shot: the path grid's box
     Aabb mDirectionalBox; ///< what directional lights cover (PhotonSettings::directionalBounds)
     std::vector<PhotonEmitter> mEmitters; ///< as shot; index = PhotonPath::light
