@@ -20,6 +20,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -80,7 +81,8 @@ void runFrames(FrameSchedule& frame, Registry& registry, int frames) {
     }
 }
 
-/// What `frames` frames of `frame` write to stderr (its warnings), after `edit` ran before each.
+/// The warnings `frames` frames of `frame` write to stderr (information lines left out), after
+/// `edit` ran before each.
 template <typename Edit>
 std::string warningsOf(FrameSchedule& frame, Registry& registry, int frames, Edit&& edit) {
     ::testing::internal::CaptureStderr();
@@ -88,7 +90,15 @@ std::string warningsOf(FrameSchedule& frame, Registry& registry, int frames, Edi
         edit();
         runFrames(frame, registry, 1);
     }
-    return ::testing::internal::GetCapturedStderr();
+    const std::string all = ::testing::internal::GetCapturedStderr();
+    std::string warnings;
+    for (std::size_t begin = 0; begin < all.size();) {
+        const std::size_t end = std::min(all.find('\n', begin), all.size());
+        const std::string line = all.substr(begin, end - begin);
+        if (line.find("warning:") != std::string::npos) warnings += line + "\n";
+        begin = end + 1;
+    }
+    return warnings;
 }
 
 /// `text` holds `what` exactly once.
