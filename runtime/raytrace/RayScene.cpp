@@ -201,17 +201,18 @@ void RayScene::build(const Registry& registry) {
     registry.view<const MobileMesh>().each([&](Entity e, const MobileMesh&) {
         const CheckedMesh checked = checkedMesh(registry, e, "MobileMesh");
         if (checked.mesh.indices.empty()) return;
+        std::string who = describe(registry, e, "MobileMesh");
         if (!isUsablePose(checked.world))
-            fail(describe(registry, e, "MobileMesh"),
-                 ": WorldTransform.matrix is not invertible or reaches past ", kMaxPoseReach, " m");
+            fail(who, ": WorldTransform.matrix is not invertible or reaches past ", kMaxPoseReach,
+                 " m");
         Mobile mobile{e,
                       newScene(mSettings.buildQuality, RTC_SCENE_FLAG_NONE),
                       {},
                       checked.world,
                       glm::transpose(glm::inverse(glm::mat3(checked.world))),
-                      describe(registry, e, "MobileMesh")};
+                      std::move(who)};
         const GeometryHandle geometry =
-            newTriangles(device, checked.mesh, glm::mat4(1.f), describe(registry, e, "MobileMesh"));
+            newTriangles(device, checked.mesh, glm::mat4(1.f), mobile.who);
         rtcAttachGeometryByID(mobile.scene.get(), geometry.get(), 0);
         rtcCommitScene(mobile.scene.get());
         mobile.instance = newInstance(device, mobile.scene.get(), checked.world);

@@ -4,6 +4,7 @@
 #include "components/LightStandIn.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -43,6 +44,11 @@ bool hasLightStandIn(const Registry& registry, Entity surface) {
                               glm::all(glm::lessThanEqual(p, place.max)));
         });
     return found;
+}
+
+std::string entityName(const Registry& registry, Entity e) {
+    const Name* name = registry.tryGet<Name>(e);
+    return name ? str("'", name->value, "'") : str("entity ", e.index);
 }
 
 SceneInfo describeMeshes(const Registry& registry) {

@@ -3,6 +3,8 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/scene/SceneInfo.h"
 
+#include <string>
+
 namespace qgi {
 
 /// The camera the scene is seen through: the first Camera with `active` set, else the first
@@ -15,6 +17,9 @@ Entity findActiveCamera(const Registry& registry);
 /// stand-in, so nothing else may count it again (photons leaving the surface, probes seeing
 /// its emission). False when `surface` has no Mesh or WorldTransform.
 bool hasLightStandIn(const Registry& registry, Entity surface);
+
+/// How messages name an entity: its Name in quotes ("'crate'"), else "entity N".
+std::string entityName(const Registry& registry, Entity e);
 
 /// A SceneInfo for meshes built in code (the loaders write their own): the world bounds of
 /// every StaticMesh and MobileMesh, and their longest triangle edge as the edge bound (refine

@@ -272,7 +272,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
                 const std::uint32_t s = path.first + k;
                 const Entity from = k > 0 ? segments.hitEntity[s - 1] : Entity{};
                 for (std::size_t j = 0; j < count; ++j)
-                    if (!(from == mLeavesFrom[j] && !from.isNull()) &&
+                    if (!skipsLeaving(from, mLeavesFrom[j]) &&
                         segmentMeetsBox(segments.origin[s], segments.direction[s],
                                         segments.length[s] + tail, mMobileBoxes[j]))
                         lists[j].push_back(s);
@@ -391,7 +391,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
                 mBeyondList.clear();
                 for (std::size_t k = 0; k < part.indices.size(); ++k) {
                     const std::uint32_t i = part.indices[k];
-                    if ((part.from[k] == skipped && !skipped.isNull()) ||
+                    if (skipsLeaving(part.from[k], skipped) ||
                         !segmentMeetsBox(part.segments->origin[i], part.segments->direction[i],
                                          part.segments->length[i] + tail, box))
                         continue;

@@ -116,6 +116,11 @@ private:
     /// mobile (ReceiverSet::Receiver::convex: they cannot cross its discs from the front), else
     /// null.
     Entity leavingSkippedFrom(std::uint32_t receiver) const;
+    /// Whether a segment that starts on `from` is skipped by the discs of the receiver whose
+    /// leavingSkippedFrom() is `skipped`.
+    static bool skipsLeaving(Entity from, Entity skipped) {
+        return !skipped.isNull() && from == skipped;
+    }
     float crossingTail() const;
 
     void updateDetp(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,

@@ -2,7 +2,6 @@
 
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
-#include "components/Name.h"
 #include "components/StaticMesh.h"
 #include "components/Transform.h"
 #include "runtime/core/Log.h"
@@ -114,20 +113,16 @@ void FrameSchedule::run(Registry& registry, const FrameContext& frame) {
 void FrameSchedule::checkMeshesUnchanged(const Registry& registry) {
     // Game code's changes since the last frame (the first frame's are the scene's creation).
     if (mFramesRun++ > 0 && !mWarnedStaticEdit) {
-        const auto named = [&](Entity e) {
-            const Name* name = registry.tryGet<Name>(e);
-            return name ? str("'", name->value, "'") : str("entity ", e.index);
-        };
         std::string edit;
         for (const Entity e : registry.changed<Transform>())
             if (registry.has<StaticMesh>(e)) {
-                edit =
-                    str("static mesh ", named(e), " moved; a mesh that moves must be a MobileMesh");
+                edit = str("static mesh ", entityName(registry, e),
+                           " moved; a mesh that moves must be a MobileMesh");
                 break;
             }
         for (const Entity e : registry.changed<Mesh>())
             if (edit.empty() && (registry.has<StaticMesh>(e) || registry.has<MobileMesh>(e)))
-                edit = str("the Mesh of ", named(e), " changed");
+                edit = str("the Mesh of ", entityName(registry, e), " changed");
         if (!edit.empty()) {
             mWarnedStaticEdit = true;
             logWarning("FrameSchedule: ", edit,

@@ -44,7 +44,7 @@ void validatePhotonSettings(const PhotonSettings& s) {
         fail("PhotonSettings.gridRefreshBudget = 0: the path index would never catch up");
     checkFraction(s.compactionFraction, "compactionFraction", 1.f);
     const Aabb& box = s.directionalBounds;
-    if (box.min != Aabb{}.min || box.max != Aabb{}.max) { // set: a range on every axis
+    if (directionalBoundsSet(s)) { // set: a range on every axis
         for (int axis = 0; axis < 3; ++axis)
             if (!std::isfinite(box.min[axis]) || !std::isfinite(box.max[axis]) ||
                 !(box.max[axis] - box.min[axis] >= 0.f) ||

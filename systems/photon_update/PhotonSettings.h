@@ -62,6 +62,12 @@ struct PhotonSettings {
     Aabb directionalBounds{};
 };
 
+/// Whether PhotonSettings::directionalBounds was set (anything but Aabb{}).
+inline bool directionalBoundsSet(const PhotonSettings& settings) {
+    return settings.directionalBounds.min != Aabb{}.min ||
+           settings.directionalBounds.max != Aabb{}.max;
+}
+
 /// The most photons a store may hold at `maxBounces` (32-bit segment indices with room for
 /// compaction: 2^30 / (maxBounces + 1)).
 std::uint64_t maxPhotonCount(std::uint32_t maxBounces);

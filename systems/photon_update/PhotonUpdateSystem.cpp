@@ -4,7 +4,6 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
-#include "components/Name.h"
 #include "components/PathFollower.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
@@ -102,11 +101,10 @@ Aabb sweepAlong(const PathFollower& path, const glm::vec3& scale, const Aabb& bo
 /// path when it has one, else at its present local pose. Nodes without a Transform, or a
 /// chain deeper than any real scene's, end the walk at the world transform they have.
 Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds) {
-    constexpr int kMaxDepth = 256;
     if (objectBounds.empty()) return {};
     Aabb box = objectBounds;
     bool scripted = false;
-    for (int depth = 0; depth < kMaxDepth && !e.isNull(); ++depth) {
+    for (int depth = 0; depth < kMaxTransformDepth && !e.isNull(); ++depth) {
         const Transform* local = registry.tryGet<Transform>(e);
         const PathFollower* path = registry.tryGet<PathFollower>(e);
         if (!local) {
@@ -127,11 +125,6 @@ Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds)
 bool contains(const Aabb& outer, const Aabb& inner) {
     return glm::all(glm::lessThanEqual(outer.min, inner.min)) &&
            glm::all(glm::lessThanEqual(inner.max, outer.max));
-}
-
-std::string nameOf(const Registry& registry, Entity e) {
-    const Name* name = registry.tryGet<Name>(e);
-    return name ? str("'", name->value, "'") : str("entity ", e.index);
 }
 
 /// The box widened past rounding (of transformed corners, of rays mapped to object space),
@@ -378,9 +371,8 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
         });
     if (mSceneBox.empty()) mSceneBox = {glm::vec3(-1.f), glm::vec3(1.f)};
 
-    const Aabb& chosen = mSettings.directionalBounds;
-    if (chosen.min != Aabb{}.min || chosen.max != Aabb{}.max) {
-        mDirectionalBox = chosen;
+    if (directionalBoundsSet(mSettings)) {
+        mDirectionalBox = mSettings.directionalBounds;
         return;
     }
     mDirectionalBox = mSceneBox;
@@ -398,7 +390,7 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
         mDirectionalBox.extend(sweep.min);
         mDirectionalBox.extend(sweep.max);
         if (!contains(roomy, sweep))
-            far += str(far.empty() ? "" : ", ", nameOf(registry, mobile.entity));
+            far += str(far.empty() ? "" : ", ", entityName(registry, mobile.entity));
     }
     if (sun && !far.empty())
         logWarning("photons: the scripted paths of ", far,
@@ -440,7 +432,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         const Material* material = registry.tryGet<Material>(e);
         mAlbedo[e.index] = albedoOf(material);
         if (material && mAlbedo[e.index] != material->baseColor) // NaN never compares equal
-            logWarning("photons: Material.baseColor of ", nameOf(registry, e), " is (",
+            logWarning("photons: Material.baseColor of ", entityName(registry, e), " is (",
                        material->baseColor.x, ", ", material->baseColor.y, ", ",
                        material->baseColor.z, "), not an albedo in [0, 1]; photons reflect (",
                        mAlbedo[e.index].x, ", ", mAlbedo[e.index].y, ", ", mAlbedo[e.index].z, ")");
@@ -506,7 +498,7 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
         if (!mobile.warnedOutside && litByDirectionalLight() &&
             !contains(widened(mDirectionalBox), transformBox(mobile.objectBounds, pose))) {
             mobile.warnedOutside = true;
-            logWarning("photons: mobile ", nameOf(registry, e),
+            logWarning("photons: mobile ", entityName(registry, e),
                        " left the box the directional lights cover; beyond it no directional "
                        "photons reach it (set PhotonSettings::directionalBounds to the area it "
                        "moves in)");

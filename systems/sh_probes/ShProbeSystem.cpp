@@ -6,7 +6,6 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
-#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/ShLighting.h"
 #include "components/SpotLight.h"
@@ -636,9 +635,7 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
                 if (std::find(mWarnedOutside.begin(), mWarnedOutside.end(), e) ==
                     mWarnedOutside.end()) {
                     mWarnedOutside.push_back(e);
-                    const Name* name = registry.tryGet<Name>(e);
-                    logWarning("SH probes: avatar ",
-                               name ? str("'", name->value, "'") : str("entity ", e.index),
+                    logWarning("SH probes: avatar ", entityName(registry, e),
                                " is outside the probe volume; it takes the light of the nearest "
                                "probes");
                 }

@@ -1,9 +1,9 @@
 #include "systems/transform/TransformSystem.h"
 
-#include "components/Name.h"
 #include "components/Transform.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
+#include "runtime/scene/SceneQueries.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
@@ -20,12 +20,9 @@ glm::mat4 localMatrix(const Transform& t) {
 
 namespace {
 
-/// Parent links followed at most: far deeper than any real hierarchy.
-constexpr int kMaxDepth = 256;
-
 // True when e or one of its ancestors had its Transform changed this frame.
 bool chainChanged(const Registry& registry, Entity e) {
-    for (int depth = 0; e && depth < kMaxDepth; ++depth) {
+    for (int depth = 0; e && depth < kMaxTransformDepth; ++depth) {
         if (registry.wasChanged<Transform>(e)) return true;
         const Transform* t = registry.tryGet<Transform>(e);
         if (!t) return false;
@@ -34,11 +31,11 @@ bool chainChanged(const Registry& registry, Entity e) {
     return false;
 }
 
-/// The entity's world matrix; nullopt when its parent chain does not end within kMaxDepth
+/// The entity's world matrix; nullopt when its parent chain does not end within kMaxTransformDepth
 /// links (a loop: the importer rejects them, game code can make one).
 std::optional<glm::mat4> worldMatrix(const Registry& registry, Entity e) {
     glm::mat4 m(1.f);
-    for (int depth = 0; depth < kMaxDepth; ++depth) {
+    for (int depth = 0; depth < kMaxTransformDepth; ++depth) {
         if (!e) return m;
         const Transform* t = registry.tryGet<Transform>(e);
         if (!t) return m;
@@ -64,10 +61,9 @@ void TransformSystem::update(Registry& registry, const FrameContext& /*frame*/) 
         updates.emplace_back(e, localMatrix(local));
         if (mWarnedLoop) return;
         mWarnedLoop = true;
-        const Name* name = registry.tryGet<Name>(e);
-        logWarning("TransformSystem: the parent chain of ",
-                   name ? str("'", name->value, "'") : str("entity ", e.index),
-                   " loops (or runs past ", kMaxDepth, " parents); it is placed as a root");
+        logWarning("TransformSystem: the parent chain of ", entityName(registry, e),
+                   " loops (or runs past ", kMaxTransformDepth,
+                   " parents); it is placed as a root");
     });
     for (const auto& [e, m] : updates) {
         if (WorldTransform* w = registry.tryGet<WorldTransform>(e)) {

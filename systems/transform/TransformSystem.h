@@ -9,6 +9,10 @@ namespace qgi {
 
 struct Transform;
 
+/// Parent links a hierarchy walk follows at most: far deeper than any real scene's, so a
+/// loop (which game code can make) ends the walk instead of hanging it.
+inline constexpr int kMaxTransformDepth = 256;
+
 /// Local TRS matrix of a Transform.
 glm::mat4 localMatrix(const Transform& t);
 
