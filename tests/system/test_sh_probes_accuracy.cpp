@@ -1,52 +1,79 @@
-// SH probe irradiance in the built-in cornell scene (photon-mode semantics) against the
-// independent brute-force Monte Carlo reference (tests/reference), at the centre of an
-// avatar-sized sphere (radius 7.5 cm, the scene's avatar) for 32 normals spread over it.
+// SH probe irradiance in the built-in cornell scene (photon mode) against an independent
+// brute-force quadrature of the same light, at eight points in free space: four avatar
+// positions taken as given (off the probe nodes) and the nodes nearest to them.
 //
-// Input. The probes read per-vertex irradiance; here it comes from the reference itself
-// (samplesPerPoint = kVertexSamples per vertex), so the test measures the probe system alone,
-// not the photon transport. That input is noisy (relative standard error about
-// 1/sqrt(kVertexSamples) per vertex) and linear across each triangle; a probe averages
-// hundreds of vertices, so we allow 5% of the reference value for it (kInputAllowance). The
-// mesh is refined to 4 cm triangles (the scene default is 2 cm) to keep the input cheap.
+// What is compared. A probe turns the radiance the scene shows around a point into order-2 SH,
+// and the avatar reads irradiance from it. That radiance is the engine's (ShProbeSystem.h):
+// at a triangle's front face, emission + albedo / pi x the triangle's VertexIrradiance
+// interpolated at the hit; nothing at a back face; the environment on a miss. The test fills
+// VertexIrradiance from the path-traced reference (tests/reference: realistic, noisy values)
+// and then integrates that same radiance field by plain Monte Carlo, with its own rays and
+// random numbers (Gather below). Both sides read the same input, so the difference measures
+// the probe system alone: its quadrature, its SH truncation and its interpolation between
+// probes, and no allowance for the input's own error is needed.
 //
-// Bounds for one normal n at one point:
-//   |E_probe - E_ref| <= 4 sigma_ref + 3/32 x integral of L  (+ spread off the probe nodes)
-//                        + kInputAllowance x E_ref
-//  - sigma_ref: the reference's standard error (4096 paths; 4 sigma: a false alarm in
-//    1/16000 of the 256 comparisons);
-//  - 3/32 x integral of L over the sphere (= L00 / Y00, from the probe's own coefficients):
-//    the order-2 truncation bound for any non-negative radiance (a sum of directional
-//    sources, each off by at most 3/32 of its irradiance; runtime/math/SphericalHarmonics.h);
-//  - off the probe nodes, the spread (max - min) of the 8 corner probes' irradiance for n:
-//    trilinear interpolation returns a weighted mean of them, and irradiance that is monotone
-//    across a cell lies within their range.
-// Averaged over the 32 nearly uniform normals, band 0 is all that remains of the truncation
-// (its mean over the sphere is exact), so the average is held to the statistics, the input
-// allowance and the spread alone: a global scale error of 10% fails it.
+// Error terms, each bounded separately:
+//  - probe quadrature: raysPerProbe directions of a spherical Fibonacci set under a uniformly
+//    random rotation. Every direction of such a set is uniform on the sphere, so the
+//    projection is unbiased over rotations; kReplicates independent rotations (probe seeds)
+//    give a mean and its standard error, held to Student's t with kReplicates - 1 degrees of
+//    freedom (kProbeT);
+//  - the gather: independent directions (kSphereSamples or kGatherSamples per estimate), mean
+//    and standard error, held to kGatherZ standard errors (normal);
+//  - off the probe nodes, the spread (max - min) over the 8 corner probes (their replicate
+//    means): trilinear interpolation returns a weighted mean of the corners, and light that
+//    is monotone across a cell lies within their range;
+//  - for irradiance along a normal n only, the order-2 truncation: at most 3/32 of the
+//    integral of L over the sphere for any non-negative radiance
+//    (runtime/math/SphericalHarmonics.h, kDirectionalMaxError).
+// Checks:
+//  1. per point, the integral of L over the sphere (uniform directions; 4 pi mean L). It is
+//     band 0 of the SH (sh::integral), which truncation leaves exact: quadrature and spread
+//     only: a probe system 5 % too bright fails it at one of the nodes;
+//  2. per point and each of kNormals normals, the irradiance E(n) (cosine-weighted
+//     directions; pi mean L), truncation included.
+// About 800 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
+// test has one chance in a thousand of failing a correct system (the seeds are fixed, so a
+// given build passes or fails every time).
+#include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
+#include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/VertexIrradiance.h"
 #include "components/WorldTransform.h"
 #include "runtime/math/SphericalHarmonics.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/BuiltinScenes.h"
+#include "runtime/scene/SceneInfo.h"
 #include "systems/sh_probes/ProbeVolume.h"
 #include "systems/sh_probes/ShProbeSystem.h"
 #include "tests/reference/IrradianceReference.h"
 
+#include <glm/gtc/constants.hpp>
 #include <glm/mat3x3.hpp>
 #include <gtest/gtest.h>
+#include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <optional>
+#include <vector>
 
 namespace qgi {
 namespace {
 
-constexpr std::uint32_t kVertexSamples = 128;
-constexpr double kInputAllowance = 0.05;
+constexpr std::uint32_t kVertexSamples = 64; // reference paths per vertex: the input
+constexpr std::uint32_t kReplicates = 32;    // probe projections under independent rotations
+constexpr double kProbeT = 6.27;             // Student t, 31 degrees of freedom, two-sided 5.7e-7
+constexpr std::uint32_t kGatherSamples = 1u << 15; // directions per (point, normal)
+constexpr std::uint32_t kSphereSamples = 1u << 20; // per point: the integral's check is tight
+constexpr double kGatherZ = 5.0;                   // normal, two-sided 5.7e-7
 constexpr std::uint32_t kNormals = 32;
 
 void fillVertexIrradianceFromReference(Registry& world, const RayScene& scene) {
@@ -78,7 +105,123 @@ void fillVertexIrradianceFromReference(Registry& world, const RayScene& scene) {
     }
 }
 
-TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
+/// A mean and its standard error, per channel.
+struct Estimate {
+    glm::dvec3 mean{0.0}, standardError{0.0};
+};
+
+/// Monte Carlo integrals of the radiance the engine's surfaces show (the file comment), with
+/// its own random numbers: splitmix64 keyed by the estimate's index.
+class Gather {
+public:
+    Gather(const Registry& world, const RayScene& scene) : mScene(scene) {
+        mEnvironment = world.ctx().get<SceneInfo>().environment;
+        world.view<const Mesh, const Material>().each(
+            [&](Entity e, const Mesh& mesh, const Material& material) {
+                if (e.index >= mSurfaces.size()) mSurfaces.resize(e.index + 1);
+                Surface& s = mSurfaces[e.index];
+                s.mesh = &mesh;
+                s.albedo = material.baseColor;
+                s.emission = material.emission;
+                s.irradiance = world.tryGet<VertexIrradiance>(e);
+            });
+    }
+
+    /// Integral of L over the sphere around x: 4 pi mean L over uniform directions.
+    Estimate sphere(const glm::vec3& x, std::uint64_t key) const {
+        return integrate(x, key, kSphereSamples, [](double u1, double u2, glm::dvec3& d) {
+            const double z = 1.0 - 2.0 * u1, r = std::sqrt(std::max(0.0, 1.0 - z * z));
+            const double phi = glm::two_pi<double>() * u2;
+            d = {r * std::cos(phi), r * std::sin(phi), z};
+            return 4.0 * glm::pi<double>();
+        });
+    }
+
+    /// Irradiance at x over the hemisphere of unit n: pi mean L over cosine-weighted directions.
+    Estimate irradiance(const glm::vec3& x, const glm::vec3& n, std::uint64_t key) const {
+        const glm::dvec3 w(n);
+        const glm::dvec3 a = std::abs(w.x) > 0.5 ? glm::dvec3(0, 1, 0) : glm::dvec3(1, 0, 0);
+        const glm::dvec3 t = glm::normalize(glm::cross(a, w)), b = glm::cross(w, t);
+        return integrate(x, key, kGatherSamples, [&](double u1, double u2, glm::dvec3& d) {
+            const double r = std::sqrt(u1), phi = glm::two_pi<double>() * u2;
+            d = r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(1.0 - u1) * w;
+            return glm::pi<double>();
+        });
+    }
+
+private:
+    struct Surface {
+        const Mesh* mesh = nullptr;
+        glm::vec3 albedo{0.f}, emission{0.f};
+        const VertexIrradiance* irradiance = nullptr;
+    };
+
+    static std::uint64_t next(std::uint64_t& state) {
+        std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+        return z ^ (z >> 31);
+    }
+    static double uniform(std::uint64_t& state) { return double(next(state) >> 11) * 0x1p-53; }
+
+    glm::dvec3 radiance(const Ray& ray) const {
+        const std::optional<Hit> hit = mScene.intersect(ray);
+        if (!hit) return glm::dvec3(mEnvironment);
+        if (glm::dot(hit->normal, ray.direction) >= 0.f) return glm::dvec3(0.0); // back face
+        const Surface& s = mSurfaces.at(hit->entity.index);
+        glm::dvec3 e(0.0);
+        if (s.irradiance && !s.irradiance->irradiance.empty()) {
+            const std::uint32_t* corner = &s.mesh->indices.at(3 * std::size_t(hit->primitive));
+            const double u = hit->barycentrics.x, v = hit->barycentrics.y;
+            const auto& E = s.irradiance->irradiance;
+            e = (1.0 - u - v) * glm::dvec3(E.at(corner[0])) + u * glm::dvec3(E.at(corner[1])) +
+                v * glm::dvec3(E.at(corner[2]));
+        }
+        return glm::dvec3(s.emission) + glm::dvec3(s.albedo) / glm::pi<double>() * e;
+    }
+
+    template <typename Direction>
+    Estimate integrate(const glm::vec3& x, std::uint64_t key, std::uint32_t samples,
+                       Direction direction) const {
+        std::uint64_t state = key * 0x2545f4914f6cdd1dull + 17;
+        glm::dvec3 sum(0.0), sum2(0.0);
+        for (std::uint32_t i = 0; i < samples; ++i) {
+            const double u1 = uniform(state), u2 = uniform(state);
+            glm::dvec3 d;
+            const double scale = direction(u1, u2, d);
+            const glm::dvec3 value = scale * radiance(Ray{x, 0.f, glm::vec3(glm::normalize(d)),
+                                                          std::numeric_limits<float>::infinity()});
+            sum += value;
+            sum2 += value * value;
+        }
+        const double m = samples;
+        Estimate out;
+        out.mean = sum / m;
+        const glm::dvec3 variance = glm::max(sum2 / m - out.mean * out.mean, glm::dvec3(0.0));
+        out.standardError = glm::sqrt(variance / (m - 1.0));
+        return out;
+    }
+
+    const RayScene& mScene;
+    glm::vec3 mEnvironment{0.f};
+    std::vector<Surface> mSurfaces; // by entity index
+};
+
+/// Mean and standard error of the mean over the replicates, per channel.
+Estimate replicateMean(const std::vector<glm::dvec3>& values) {
+    Estimate out;
+    for (const glm::dvec3& v : values)
+        out.mean += v;
+    out.mean /= double(values.size());
+    glm::dvec3 squares(0.0);
+    for (const glm::dvec3& v : values)
+        squares += (v - out.mean) * (v - out.mean);
+    const double k = double(values.size());
+    out.standardError = glm::sqrt(squares / (k - 1.0) / k);
+    return out;
+}
+
+TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
     Registry world;
     buildBuiltinScene(world, "cornell",
                       SceneOptions{0.04f}); // 4 cm triangles: a quarter of the vertices
@@ -86,92 +229,132 @@ TEST(ShProbesAccuracy, CornellSphereAgreesWithMonteCarloReference) {
     scene.build(world);
     fillVertexIrradianceFromReference(world, scene);
 
+    // Photon mode: every punctual light of the scene must be a stand-in, which probes skip
+    // (ShProbeSystem.h), so the surfaces' radiance is all the light there is.
+    world.view<const PointLight>().each(
+        [&](Entity e, const PointLight&) { ASSERT_TRUE(world.has<LightStandIn>(e)); });
+    ASSERT_TRUE(world.view<const SpotLight>().entities().empty());
+    ASSERT_TRUE(world.view<const DirectionalLight>().entities().empty());
+
     ShProbeSettings settings;
     settings.spacing = 0.07f; // about the avatar's size
     settings.raysPerProbe = 2048;
     settings.hybrid = false; // photon mode: the luminaire's light arrives as emission
-    ShProbeSystem system(settings);
-    system.build(world);
-    system.projectAll(world);
-    const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
-    const ProbeGrid& grid = volume.grid();
 
     // Sphere centres in free space: above the short block, high in the middle, low in the
-    // front-left corner where the scene's avatar walks, behind the short block. Each is
-    // taken as given (off the nodes) and at its nearest probe node.
+    // front-left corner where the scene's avatar walks, behind the short block. Each is taken
+    // as given (off the nodes) and at its nearest probe node.
     const glm::vec3 bases[] = {{0.09f, 0.30f, -0.17f},
                                {0.f, 0.40f, -0.28f},
                                {-0.20f, 0.10f, -0.10f},
                                {0.20f, 0.25f, -0.40f}};
     struct Point {
         glm::vec3 x;
-        bool node;
+        bool node = false;
+        ProbeBlend blend;
+        std::vector<sh::ShRgb> probe;                // interpolated SH, per replicate
+        std::vector<std::vector<sh::ShRgb>> corners; // per corner, per replicate
     };
     std::vector<Point> points;
-    for (const glm::vec3& b : bases) {
-        points.push_back({b, false});
-        glm::ivec3 cell;
-        glm::vec3 t;
-        grid.locate(b, cell, t);
-        const std::uint32_t node = grid.probeIndex(cell + glm::ivec3(glm::round(t)));
-        ASSERT_TRUE(volume.enabled(node));
-        points.push_back({grid.position(node), true});
+    for (std::uint32_t r = 0; r < kReplicates; ++r) {
+        settings.seed = 1 + r;
+        ShProbeSystem system(settings);
+        system.build(world);
+        system.projectAll(world);
+        const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
+        if (r == 0)
+            for (const glm::vec3& b : bases) {
+                points.push_back({b, false, {}, {}, {}});
+                glm::ivec3 cell;
+                glm::vec3 t;
+                volume.grid().locate(b, cell, t);
+                const std::uint32_t node =
+                    volume.grid().probeIndex(cell + glm::ivec3(glm::round(t)));
+                ASSERT_TRUE(volume.enabled(node));
+                points.push_back({volume.grid().position(node), true, {}, {}, {}});
+            }
+        for (Point& p : points) {
+            sh::ShRgb L;
+            ProbeBlend blend;
+            ASSERT_TRUE(volume.interpolate(p.x, L, &blend));
+            if (r == 0) {
+                p.blend = blend;
+                p.corners.resize(8);
+            }
+            // Blending depends on geometry only: the same corners and weights every time.
+            for (int c = 0; c < 8; ++c) {
+                ASSERT_EQ(blend.probes[c], p.blend.probes[c]);
+                ASSERT_EQ(blend.weights[c], p.blend.weights[c]);
+                p.corners[c].push_back(volume.coefficients(blend.probes[c]));
+            }
+            p.probe.push_back(L);
+        }
     }
+
+    const Gather gather(world, scene);
     std::vector<glm::vec3> normals;
     for (std::uint32_t k = 0; k < kNormals; ++k)
         normals.push_back(sh::fibonacciDirection(k, kNormals));
+    // Per point: the sphere integral, then one irradiance per normal.
+    const std::size_t perPoint = 1 + kNormals;
+    std::vector<Estimate> gathered(points.size() * perPoint);
+    tbb::parallel_for(std::size_t(0), gathered.size(), [&](std::size_t i) {
+        const Point& p = points[i / perPoint];
+        const std::size_t j = i % perPoint;
+        gathered[i] = j == 0 ? gather.sphere(p.x, i) : gather.irradiance(p.x, normals[j - 1], i);
+    });
 
-    std::vector<glm::vec3> xs, ns;
-    for (const Point& p : points)
-        for (const glm::vec3& n : normals) {
-            xs.push_back(p.x);
-            ns.push_back(n);
+    // A quantity of the SH (integral or irradiance along n) through its replicates and through
+    // the corners' replicate means, against the gather's estimate of it.
+    const auto compare = [&](const Point& p, const Estimate& reference, auto quantity,
+                             bool truncated, const char* what) {
+        std::vector<glm::dvec3> values;
+        for (const sh::ShRgb& L : p.probe)
+            values.push_back(glm::dvec3(quantity(L)));
+        const Estimate probe = replicateMean(values);
+        glm::dvec3 lo(1e300), hi(-1e300);
+        for (int c = 0; c < 8; ++c) {
+            if (p.node || p.blend.weights[c] <= 0.f) continue;
+            std::vector<glm::dvec3> corner;
+            for (const sh::ShRgb& L : p.corners[c])
+                corner.push_back(glm::dvec3(quantity(L)));
+            const glm::dvec3 m = replicateMean(corner).mean;
+            lo = glm::min(lo, m);
+            hi = glm::max(hi, m);
         }
-    reference::ReferenceSettings refSettings;
-    refSettings.samplesPerPoint = 4096;
-    refSettings.seed = 5;
-    const auto ref = reference::estimateIrradiance(world, scene, xs, ns, refSettings);
-
-    std::size_t k = 0;
-    for (const Point& p : points) {
-        sh::ShRgb L;
-        ProbeBlend blend;
-        ASSERT_TRUE(volume.interpolate(p.x, L, &blend));
-        const glm::vec3 truncation = sh::kDirectionalMaxError * sh::integral(L);
-        double sumProbe[3] = {}, sumRef[3] = {}, varRef[3] = {}, sumSpread[3] = {};
-        for (const glm::vec3& n : normals) {
-            const glm::vec3 e = sh::irradiance(L, n);
-            glm::vec3 lo(1e30f), hi(-1e30f);
-            for (int c = 0; c < 8; ++c)
-                if (blend.weights[c] > 0.f) {
-                    const glm::vec3 corner =
-                        sh::irradiance(volume.coefficients(blend.probes[c]), n);
-                    lo = glm::min(lo, corner);
-                    hi = glm::max(hi, corner);
-                }
-            const glm::vec3 spread = p.node ? glm::vec3(0.f) : hi - lo;
-            for (int c = 0; c < 3; ++c) {
-                const double r = ref[k].mean[c], se = ref[k].standardError[c];
-                const double bound = 4.0 * se + truncation[c] + spread[c] + kInputAllowance * r;
-                EXPECT_NEAR(e[c], r, bound) << "point " << p.x.x << "," << p.x.y << "," << p.x.z
-                                            << (p.node ? " (node)" : "") << " normal " << n.x << ","
-                                            << n.y << "," << n.z << " channel " << c;
-                sumProbe[c] += e[c];
-                sumRef[c] += r;
-                varRef[c] += se * se;
-                sumSpread[c] += spread[c];
-            }
-            ++k;
-        }
+        const glm::dvec3 spread = p.node ? glm::dvec3(0.0) : hi - lo;
+        glm::dvec3 integral(0.0);
+        for (const sh::ShRgb& L : p.probe)
+            integral += glm::dvec3(sh::integral(L));
+        integral /= double(p.probe.size());
+        const glm::dvec3 truncation =
+            truncated ? double(sh::kDirectionalMaxError) * integral : glm::dvec3(0.0);
         for (int c = 0; c < 3; ++c) {
-            const double meanProbe = sumProbe[c] / kNormals, meanRef = sumRef[c] / kNormals;
-            const double bound = 4.0 * std::sqrt(varRef[c]) / kNormals + kInputAllowance * meanRef +
-                                 sumSpread[c] / kNormals;
-            EXPECT_NEAR(meanProbe, meanRef, bound) << "normal-averaged, point " << p.x.x << ","
-                                                   << p.x.y << "," << p.x.z << " channel " << c;
-            std::printf("point (%.3f %.3f %.3f)%s ch%d: mean E probe %.3f ref %.3f (bound %.3f)\n",
-                        p.x.x, p.x.y, p.x.z, p.node ? " node" : "     ", c, meanProbe, meanRef,
-                        bound);
+            const double bound = kProbeT * probe.standardError[c] +
+                                 kGatherZ * reference.standardError[c] + spread[c] + truncation[c];
+            EXPECT_NEAR(probe.mean[c], reference.mean[c], bound)
+                << what << " at " << p.x.x << "," << p.x.y << "," << p.x.z
+                << (p.node ? " (node)" : "") << " channel " << c << ": probe standard error "
+                << probe.standardError[c] << ", gather " << reference.standardError[c]
+                << ", spread " << spread[c] << ", truncation " << truncation[c];
+        }
+        return probe;
+    };
+
+    for (std::size_t i = 0; i < points.size(); ++i) {
+        const Point& p = points[i];
+        const Estimate& ref = gathered[i * perPoint];
+        const Estimate probe = compare(
+            p, ref, [](const sh::ShRgb& L) { return sh::integral(L); }, false, "integral of L");
+        std::printf("point (%.3f %.3f %.3f)%s: integral of L, green: probe %.4f +- %.4f, "
+                    "gather %.4f +- %.4f\n",
+                    p.x.x, p.x.y, p.x.z, p.node ? " node" : "     ", probe.mean.g,
+                    probe.standardError.g, ref.mean.g, ref.standardError.g);
+        for (std::uint32_t k = 0; k < kNormals; ++k) {
+            const glm::vec3 n = normals[k];
+            compare(
+                p, gathered[i * perPoint + 1 + k],
+                [n](const sh::ShRgb& L) { return sh::irradiance(L, n); }, true, "irradiance");
         }
     }
 }
