@@ -216,6 +216,7 @@ void RayScene::build(const Registry& registry) {
         rtcAttachGeometryByID(mobile.scene.get(), geometry.get(), 0);
         rtcCommitScene(mobile.scene.get());
         mobile.instance = newInstance(device, mobile.scene.get(), checked.world);
+        activateMobile(mobile, registry.get<MobileMesh>(e).active);
         const auto index = std::uint32_t(mobiles.size());
         rtcAttachGeometryByID(top.get(), mobile.instance.get(), kStaticInstance + 1 + index);
         mobileIndex.emplace(e, index);
@@ -260,8 +261,25 @@ std::size_t RayScene::syncMoved(const Registry& registry) {
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);
         if (world && placeMobile(mMobiles[it->second], world->matrix)) ++moved;
     }
+    for (const Entity e : registry.changed<MobileMesh>()) {
+        const auto it = mMobileIndex.find(e);
+        const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
+        if (it != mMobileIndex.end() && mobile &&
+            activateMobile(mMobiles[it->second], mobile->active))
+            ++moved;
+    }
     if (moved > 0) rtcCommitScene(mTop.get());
     return moved;
+}
+
+bool RayScene::activateMobile(Mobile& mobile, bool active) {
+    if (mobile.active == active) return false;
+    if (active)
+        rtcEnableGeometry(mobile.instance.get());
+    else
+        rtcDisableGeometry(mobile.instance.get());
+    mobile.active = active;
+    return true;
 }
 
 bool RayScene::setMobilePose(Entity mobile, const glm::mat4& pose) {
@@ -280,6 +298,10 @@ const RayScene::Mobile& RayScene::mobileOf(Entity entity) const {
 
 const glm::mat4& RayScene::mobilePose(Entity mobile) const {
     return mobileOf(mobile).pose;
+}
+
+bool RayScene::mobileActive(Entity mobile) const {
+    return mobileOf(mobile).active;
 }
 
 Hit RayScene::makeHit(const RTCHit& hit, float t) const {

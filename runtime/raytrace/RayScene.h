@@ -49,8 +49,10 @@ public:
     void build(const Registry& registry);
 
     /// Moves the instances of mobiles whose WorldTransform changed this frame
-    /// (`registry.changed<WorldTransform>()`) and commits the top level once. Entities that
-    /// are not mobiles of this scene are ignored. Returns the number of mobiles moved.
+    /// (`registry.changed<WorldTransform>()`), enables or disables those whose
+    /// MobileMesh::active changed (`registry.changed<MobileMesh>()`), and commits the top level
+    /// once. Entities that are not mobiles of this scene are ignored. Returns the number of
+    /// mobiles moved, taken out or put back.
     std::size_t syncMoved(const Registry& registry);
 
     /// Moves one mobile to `pose` (object to world) and commits the top level. Returns false,
@@ -81,7 +83,8 @@ public:
     }
 
     /// Closest hit of `ray` on `mobile` alone, placed at `pose` instead of its current pose;
-    /// the rest of the scene is ignored and nothing is changed. `mobile` must be a mobile of
+    /// the rest of the scene is ignored and nothing is changed. The mobile-only queries below
+    /// see the mobile whether it is active or not. `mobile` must be a mobile of
     /// this scene (isMobile). Returns nullopt when the pose is not invertible.
     std::optional<Hit> intersectMobile(Entity mobile, const glm::mat4& pose, const Ray& ray) const;
     /// intersectMobile for a ray already in `mobile`'s object space, with the pose's inverse
@@ -99,6 +102,10 @@ public:
     bool isMobile(Entity entity) const { return mMobileIndex.contains(entity); }
     /// The pose the mobile's instance has now. `mobile` must be a mobile of this scene.
     const glm::mat4& mobilePose(Entity mobile) const;
+    /// Whether the mobile is in the scene now (MobileMesh::active as last synced): an inactive
+    /// mobile is missed by every query but the mobile-only ones. `mobile` must be a mobile of
+    /// this scene.
+    bool mobileActive(Entity mobile) const;
     std::size_t mobileCount() const { return mMobiles.size(); }
     std::size_t staticTriangleCount() const { return mStaticTriangleCount; }
 
@@ -123,11 +130,14 @@ private:
         glm::mat4 pose{1.f};         ///< object to world
         glm::mat3 normalMatrix{1.f}; ///< inverse transpose of pose's linear part
         std::string who;             ///< "RayScene: MobileMesh entity N 'name'", for warnings
+        bool active = true;          ///< its instance is enabled in the top level
     };
     struct FilterContext; // RTCIntersectContext plus the accept function
 
     SceneHandle newScene(RTCBuildQuality quality, RTCSceneFlags extraFlags) const;
     bool placeMobile(Mobile& mobile, const glm::mat4& pose);
+    /// Enables or disables the mobile's instance; true when that changed anything.
+    static bool activateMobile(Mobile& mobile, bool active);
     /// The mobile of `entity`, which must be one (asserted).
     const Mobile& mobileOf(Entity entity) const;
     Hit makeHit(const RTCHit& hit, float t) const;

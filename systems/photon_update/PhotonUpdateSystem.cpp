@@ -354,7 +354,7 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
     registry.view<const MobileMesh, const Mesh>().each(
         [&](Entity e, const MobileMesh&, const Mesh& mesh) {
             if (!scene.isMobile(e)) return;
-            Mobile mobile{e, {}, scene.mobilePose(e), {}};
+            Mobile mobile{e, {}, scene.mobilePose(e), scene.mobileActive(e), {}};
             for (const glm::vec3& p : mesh.positions)
                 mobile.objectBounds.extend(p);
             mobile.facetNormals.reserve(mesh.indices.size() / 3);
@@ -481,21 +481,28 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
 void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RayScene& scene,
                                           PhotonDelta& delta) {
     mMoved.clear();
-    for (const Entity e : registry.changed<WorldTransform>()) {
+    const auto follow = [&](Entity e) {
         const auto it = mMobileIndex.find(e);
-        if (it == mMobileIndex.end() || !scene.isMobile(e)) continue;
+        if (it == mMobileIndex.end() || !scene.isMobile(e)) return;
         Mobile& mobile = mMobiles[it->second];
         const glm::mat4& pose = scene.mobilePose(e);
-        if (pose == mobile.pose) continue; // also skips an entity listed twice
-        const glm::mat4 toObject = glm::inverse(pose);
-        mMoved.push_back({e, pose, toObject, glm::transpose(glm::mat3(toObject)),
-                          glm::vec3(pose[3] - mobile.pose[3]), widened(mobile.objectBounds),
-                          widened(transformBox(mobile.objectBounds, mobile.pose)),
-                          widened(transformBox(mobile.objectBounds, pose)),
-                          glm::mat3(pose) == glm::mat3(mobile.pose) ? &mobile : nullptr});
-        mobile.pose = pose;
+        const bool active = scene.mobileActive(e);
+        // Also skips an entity listed twice, or in both change lists.
+        if (pose == mobile.pose && active == mobile.active) return;
         delta.movedMobiles.push_back(e);
-        if (!mobile.warnedOutside && litByDirectionalLight() &&
+        if (mobile.active || active) {
+            const glm::mat4 toObject = glm::inverse(pose);
+            const bool turned = glm::mat3(pose) != glm::mat3(mobile.pose);
+            mMoved.push_back(
+                {e, pose, toObject, glm::transpose(glm::mat3(toObject)),
+                 glm::vec3(pose[3] - mobile.pose[3]), widened(mobile.objectBounds),
+                 mobile.active ? widened(transformBox(mobile.objectBounds, mobile.pose)) : Aabb{},
+                 active ? widened(transformBox(mobile.objectBounds, pose)) : Aabb{},
+                 mobile.active && active && !turned ? &mobile : nullptr, active});
+        }
+        mobile.pose = pose;
+        mobile.active = active;
+        if (active && !mobile.warnedOutside && litByDirectionalLight() &&
             !contains(widened(mDirectionalBox), transformBox(mobile.objectBounds, pose))) {
             mobile.warnedOutside = true;
             logWarning("photons: mobile ", entityName(registry, e),
@@ -503,7 +510,11 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
                        "photons reach it (set PhotonSettings::directionalBounds to the area it "
                        "moves in)");
         }
-    }
+    };
+    for (const Entity e : registry.changed<WorldTransform>())
+        follow(e);
+    for (const Entity e : registry.changed<MobileMesh>())
+        follow(e);
     mStats.movedMobiles = mMoved.size();
 }
 
@@ -546,10 +557,9 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
         return;
     }
     mQueryBoxes.clear();
-    for (const MovedMobile& m : mMoved) {
-        mQueryBoxes.push_back(m.oldBox);
-        mQueryBoxes.push_back(m.newBox);
-    }
+    for (const MovedMobile& m : mMoved)
+        for (const Aabb& box : {m.oldBox, m.newBox})
+            if (!box.empty()) mQueryBoxes.push_back(box);
     grid.pathsOverlapping(mQueryBoxes, mCandidates);
     mFirstAffected.resize(mCandidates.size());
 
@@ -598,7 +608,7 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
         // World box, then the tight object-space box (an affine map keeps t), then the
         // mobile's triangles.
         for (const MovedMobile& m : mMoved) {
-            if (!segmentMeetsBox(o, d, length, m.newBox)) continue;
+            if (!m.active || !segmentMeetsBox(o, d, length, m.newBox)) continue;
             const Ray local = m.toLocal(o, d, length);
             if (segmentMeetsBox(local.origin, local.direction, length, m.objectBox) &&
                 scene.occludedByMobile(m.entity, local))
@@ -641,7 +651,8 @@ bool PhotonUpdateSystem::lands(const RayScene& scene, const PhotonSegments& segm
         !mobile.translated->sameFacet(hit->primitive, segments.hitPrimitive[s]))
         return false;
     for (const MovedMobile& other : mMoved) {
-        if (&other == &mobile || !segmentMeetsBox(o, d, hit->t, other.newBox)) continue;
+        if (&other == &mobile || !other.active || !segmentMeetsBox(o, d, hit->t, other.newBox))
+            continue;
         if (scene.occludedByMobile(other.entity, other.toLocal(o, d, hit->t))) return false;
     }
     primitive = hit->primitive;

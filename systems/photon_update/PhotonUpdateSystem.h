@@ -38,6 +38,7 @@ class PhotonPathGrid;
  *   - Mobiles whose pose changed (the ray scene already holds the new pose): the paths with a
  *     segment that hit a moved mobile at its old pose (its recorded hit), or that crosses it
  *     at its new pose, are re-traced from their first such segment; the prefix is untouched.
+ *     A mobile taken out (MobileMesh::active) has no new pose, one put back no old one.
  *     Candidates come from the PhotonPathGrid (old and new boxes of every moved mobile), then
  *     an exact test per segment: cost grows with the paths near the mobiles.
  *   - Lights that moved or changed: their own photons are re-shot with the same indices,
@@ -58,7 +59,8 @@ class PhotonPathGrid;
  *  Every random choice comes from PhotonSettings::seed (FrameContext::seed is not read: the
  *  ray set must not change when only the frame does).
  *
- *  Reads:  const WorldTransform (and its change list), const StaticMesh, const MobileMesh,
+ *  Reads:  const WorldTransform (and its change list), const StaticMesh, const MobileMesh (and
+ *          its change list),
  *          const PathFollower, const Transform, const Name (at the first shot),
  *          const Mesh, const Material (and its change list), const PointLight,
  *          const SpotLight, const DirectionalLight, ctx<const RayScene> (synced this frame)
@@ -98,6 +100,7 @@ private:
         Entity entity;
         Aabb objectBounds;
         glm::mat4 pose{1.f}; ///< the pose the stored paths were traced against
+        bool active = true;  ///< whether they were traced with it in the scene
         std::vector<glm::vec3> facetNormals; ///< unit, object space, per triangle (0: degenerate)
         bool warnedOutside = false;          ///< named once for leaving the directional lights' box
         /// Triangles a and b lie in one plane facing the same way (a == b included).
@@ -117,10 +120,14 @@ private:
         glm::mat3 normalMatrix{1.f};
         glm::vec3 shift{0.f};    ///< new minus old translation
         Aabb objectBox;          ///< object-space bounds, slightly widened
-        Aabb oldBox, newBox;     ///< world bounds at the old and new pose, slightly widened
-        /// The mobile, when the linear part of its pose is unchanged (it only translated);
-        /// null otherwise. Points into mMobiles, which does not change between full shots.
+        /// World bounds at the old and new pose, slightly widened; empty where the mobile was
+        /// or is inactive.
+        Aabb oldBox, newBox;
+        /// The mobile, when the linear part of its pose is unchanged (it only translated) and
+        /// it is active at both poses; null otherwise. Points into mMobiles, which does not
+        /// change between full shots.
         const Mobile* translated = nullptr;
+        bool active = true; ///< in the scene at its new pose (the crossing test applies)
         /// The world segment origin + t direction, t in [0, length], in object space (an
         /// affine map keeps t).
         Ray toLocal(const glm::vec3& origin, const glm::vec3& direction, float length) const {

@@ -4,6 +4,7 @@
 
 #include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
+#include "components/MobileMesh.h"
 #include "components/PathFollower.h"
 #include "components/Transform.h"
 #include "components/VertexIrradiance.h"
@@ -25,6 +26,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <map>
 #include <optional>
 #include <random>
 #include <string>
@@ -80,10 +82,12 @@ void moveAll(Registry& registry, PhotonUpdateSystem& system,
 
 /// Brute force over every stored segment: the first segment of each path that hit one of
 /// `moved` (at its old pose, as recorded) or crosses it at its new pose, and that `landed`
-/// (when given) does not excuse; -1 when none.
+/// (when given) does not excuse; -1 when none. Mobiles listed in `out` are inactive now: only
+/// their recorded hits count.
 std::vector<int> bruteForceFirstAffected(const PhotonStore& before, const RayScene& scene,
                                          const std::vector<std::pair<Entity, glm::mat4>>& moved,
-                                         const std::function<bool(std::size_t)>& landed = {}) {
+                                         const std::function<bool(std::size_t)>& landed = {},
+                                         const std::vector<Entity>& out = {}) {
     std::vector<int> first(before.pathCount(), -1);
     for (std::size_t p = 0; p < before.pathCount(); ++p) {
         const PhotonPath& path = before.paths[p];
@@ -91,10 +95,13 @@ std::vector<int> bruteForceFirstAffected(const PhotonStore& before, const RaySce
             const std::size_t s = path.first + std::size_t(k);
             const Ray ray{before.segments.origin[s], 0.f, before.segments.direction[s],
                           before.segments.length[s]};
-            for (const auto& [e, pose] : moved)
-                if ((before.segments.hitEntity[s] == e || scene.intersectMobile(e, pose, ray)) &&
+            for (const auto& [e, pose] : moved) {
+                const bool active = std::find(out.begin(), out.end(), e) == out.end();
+                if ((before.segments.hitEntity[s] == e ||
+                     (active && scene.intersectMobile(e, pose, ray))) &&
                     !(landed && landed(s)))
                     first[p] = k;
+            }
         }
     }
     return first;
@@ -300,6 +307,85 @@ TEST(PhotonUpdate, RandomMovesRetraceExactlyTheAffectedPathsAndMatchAFullReshoot
     PhotonUpdateSystem full(settings);
     firstUpdate(fresh, full);
     EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+}
+
+TEST(PhotonUpdate, MobilesTakenOutAndPutBackRetraceExactlyTheirPathsAndMatchAFullShot) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const RayScene& scene = buildRayScene(registry);
+    PhotonSettings settings = settingsWith(20'000);
+    settings.reuseLandedPaths = false; // the seed's rule, bit for bit
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore first = storeOf(registry);
+
+    std::mt19937 rng(77);
+    const std::vector<Entity> mobiles{room.cube, room.crate};
+    std::map<Entity, glm::mat4> pose{{room.cube, translation(kCubeRest)},
+                                     {room.crate, translation(kCrateRest)}};
+    std::map<Entity, bool> active{{room.cube, true}, {room.crate, true}};
+    std::size_t retraced = 0, takenOut = 0, putBack = 0;
+    for (std::uint64_t frame = 1; frame <= 16; ++frame) {
+        // Each mobile, with equal odds: stays, moves, is taken out or put back where it is, or
+        // is taken out or put back somewhere else.
+        std::vector<std::pair<Entity, glm::mat4>> changed;
+        std::vector<Entity> out;
+        for (const Entity e : mobiles) {
+            const int action = int(rng() % 4);
+            if (action == 0) continue;
+            if (action != 2) {
+                pose[e] = randomPose(rng, e == room.cube ? 0.45f : 0.35f);
+                registry.patch<WorldTransform>(e).matrix = pose[e];
+            }
+            if (action >= 2) {
+                active[e] = !active[e];
+                registry.patch<MobileMesh>(e).active = active[e];
+                (active[e] ? putBack : takenOut) += 1;
+            }
+            changed.emplace_back(e, pose[e]);
+            if (!active[e]) out.push_back(e);
+        }
+        const PhotonStore before = storeOf(registry);
+        registry.ctx().get<RayScene>().syncMoved(registry);
+        system.update(registry, FrameContext{frame, 0.0, 0.f, 0});
+        registry.clearChanges();
+        expectExactDelta(before, storeOf(registry), deltaOf(registry),
+                         bruteForceFirstAffected(before, scene, changed, {}, out));
+        EXPECT_EQ(deltaOf(registry).movedMobiles.size(), changed.size());
+        retraced += deltaOf(registry).paths.size();
+        if (HasFatalFailure()) return;
+    }
+    EXPECT_GT(takenOut, 2u);
+    EXPECT_GT(putBack, 2u);
+    EXPECT_GT(retraced, 2'000u);
+    // No stored segment hits an inactive mobile: the ray scene misses them.
+    expectHitsReproduce(storeOf(registry), scene);
+
+    // The same scene shot from scratch as it ended: the same ray set.
+    {
+        Registry fresh;
+        const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
+        for (const auto& [mine, theirs] :
+             {std::pair{room.cube, again.cube}, std::pair{room.crate, again.crate}}) {
+            fresh.patch<WorldTransform>(theirs).matrix = pose[mine];
+            fresh.get<MobileMesh>(theirs).active = active[mine];
+        }
+        buildRayScene(fresh);
+        PhotonUpdateSystem full(settings);
+        firstUpdate(fresh, full);
+        EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+    }
+
+    // Both back where they started, in one frame: the first shot again, bit for bit.
+    for (const Entity e : mobiles) {
+        registry.patch<WorldTransform>(e).matrix =
+            translation(e == room.cube ? kCubeRest : kCrateRest);
+        registry.patch<MobileMesh>(e).active = true;
+    }
+    registry.ctx().get<RayScene>().syncMoved(registry);
+    system.update(registry, FrameContext{17, 0.0, 0.f, 0});
+    EXPECT_FALSE(deltaOf(registry).full);
+    EXPECT_TRUE(sameStore(storeOf(registry), first));
 }
 
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {

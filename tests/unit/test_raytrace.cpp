@@ -442,6 +442,42 @@ TEST(RayScene, TwoMobilesMoveInOneFrame) {
     EXPECT_NEAR(left->t, 3.1f - std::sqrt(0.5f), 1e-5f);
 }
 
+TEST(RayScene, AnInactiveMobileIsMissedUntilPutBack) {
+    Registry registry;
+    const Entity wall = addMesh(registry, quad(-1, -1, 1, 1), kIdentity, Mobility::Static);
+    const Entity crate = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, 2),
+                                 Mobility::Mobile);
+    const Entity pooled = addMesh(registry, test::boxMesh({0.5f, 0.5f, 0.5f}), translation(0, 0, 4),
+                                  Mobility::Mobile);
+    registry.get<MobileMesh>(pooled).active = false; // built inactive
+    RayScene scene;
+    scene.build(registry);
+    const Ray down = ray({0, 0, 5}, {0, 0, -1});
+    EXPECT_FALSE(scene.mobileActive(pooled));
+    EXPECT_EQ(scene.intersect(down)->entity, crate);
+    EXPECT_TRUE(scene.occluded(down));
+
+    // Out: the ray reaches the wall; in: the pooled box, moved while inactive, is hit where
+    // it stands now. Unchanged flags cost nothing.
+    registry.clearChanges();
+    registry.patch<MobileMesh>(crate).active = false;
+    EXPECT_EQ(scene.syncMoved(registry), 1u);
+    EXPECT_EQ(scene.intersect(down)->entity, wall);
+    EXPECT_NEAR(scene.intersect(down)->t, 5.f, 1e-5f);
+    registry.clearChanges();
+    moveTo(registry, pooled, translation(0, 0, 3));
+    registry.patch<MobileMesh>(pooled).active = true;
+    registry.patch<MobileMesh>(crate).active = false;
+    EXPECT_EQ(scene.syncMoved(registry), 2u); // pooled moved and put back; crate unchanged
+    ASSERT_TRUE(scene.intersect(down));
+    EXPECT_EQ(scene.intersect(down)->entity, pooled);
+    EXPECT_NEAR(scene.intersect(down)->t, 1.5f, 1e-5f);
+    EXPECT_TRUE(scene.mobileActive(pooled));
+    EXPECT_FALSE(scene.mobileActive(crate));
+    // The mobile-only queries still see an inactive mobile.
+    EXPECT_TRUE(scene.occludedByMobile(crate, ray({0, 0, 5}, {0, 0, -1})));
+}
+
 TEST(RayScene, SetMobilePoseMovesOneMobileAndRejectsBadPoses) {
     Registry registry;
     const Entity wall = addMesh(registry, quad(-1, -1, 1, 1), kIdentity, Mobility::Static);
