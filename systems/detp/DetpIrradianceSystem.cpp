@@ -1,5 +1,6 @@
 #include "systems/detp/DetpIrradianceSystem.h"
 
+#include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
@@ -90,6 +91,11 @@ void DetpIrradianceSystem::build(Registry& registry) {
     mIrradiance.assign(vertices, glm::vec3(0.f));
     mIsTouched.assign(vertices, 0);
     mIsMoved.assign(mReceivers.receivers().size(), 0);
+    mActive.assign(mReceivers.receivers().size(), 1);
+    for (std::size_t r = 0; r < mActive.size(); ++r) {
+        const auto& receiver = mReceivers.receivers()[r];
+        if (receiver.mobile) mActive[r] = mobileActive(registry, receiver.entity);
+    }
     mBuilt = true;
     mNeedsFull = true;
     std::size_t mobiles = 0, convex = 0;
@@ -138,20 +144,34 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     mStats.full = full;
 }
 
+bool DetpIrradianceSystem::mobileActive(const Registry& registry, Entity mobile) {
+    // The ray scene's view, which the photons were traced against, when it has the mobile.
+    if (const RayScene* scene = registry.ctx().find<RayScene>(); scene && scene->isMobile(mobile))
+        return scene->mobileActive(mobile);
+    const MobileMesh* tag = registry.tryGet<MobileMesh>(mobile);
+    return !tag || tag->active;
+}
+
 void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const PhotonDelta& delta) {
     for (const std::uint32_t r : mMoved)
         mIsMoved[r] = 0;
     mMoved.clear();
     const auto consider = [&](Entity e) {
-        const std::int64_t r = mReceivers.find(e);
-        if (r < 0 || !mReceivers.receivers()[std::size_t(r)].mobile || mIsMoved[std::size_t(r)])
-            return;
+        const std::int64_t found = mReceivers.find(e);
+        if (found < 0) return;
+        const auto r = std::size_t(found);
+        if (!mReceivers.receivers()[r].mobile || mIsMoved[r]) return;
+        const bool active = mobileActive(registry, e);
+        const bool switched = active != bool(mActive[r]);
+        mActive[r] = active;
         // A pose the ray scene would refuse too: keep the mobile's light where it was.
-        if (!mReceivers.refreshPose(registry, std::uint32_t(r))) return;
-        mIsMoved[std::size_t(r)] = 1;
+        if (!mReceivers.refreshPose(registry, std::uint32_t(r)) && !switched) return;
+        mIsMoved[r] = 1;
         mMoved.push_back(std::uint32_t(r));
     };
     for (const Entity e : registry.changed<WorldTransform>())
+        consider(e);
+    for (const Entity e : registry.changed<MobileMesh>())
         consider(e);
     for (const Entity e : delta.movedMobiles)
         consider(e);
@@ -227,18 +247,27 @@ float DetpIrradianceSystem::crossingTail() const {
     return (kDiscEndTolerance + DiscIndex::kEmbreeSlack) * mRadius;
 }
 
+void DetpIrradianceSystem::clearReceiver(std::uint32_t receiver) {
+    const auto& r = mReceivers.receivers()[receiver];
+    const std::uint32_t first = r.firstVertex, end = first + r.vertexCount;
+    std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
+    std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
+    std::fill(mIrradiance.begin() + first, mIrradiance.begin() + end, glm::vec3(0.f));
+}
+
 void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const PhotonStore& store,
-                                           std::span<const std::uint32_t> mobiles) {
-    if (mobiles.empty()) return;
-    const std::size_t count = mobiles.size();
+                                           std::span<const std::uint32_t> requested) {
+    mEstimated.clear();
     mMobileBoxes.clear();
-    for (const std::uint32_t r : mobiles) {
-        const auto& receiver = mReceivers.receivers()[r];
-        const std::uint32_t first = receiver.firstVertex, end = first + receiver.vertexCount;
-        std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
-        std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
+    for (const std::uint32_t r : requested) {
+        clearReceiver(r); // an inactive mobile stays so
+        if (!mActive[r]) continue;
+        mEstimated.push_back(r);
         mMobileBoxes.push_back(discBounds(r));
     }
+    const std::span<const std::uint32_t> mobiles = mEstimated;
+    if (mobiles.empty()) return;
+    const std::size_t count = mobiles.size();
     const float tail = crossingTail();
     const PhotonSegments& segments = store.segments;
     mLeavesFrom.clear();
@@ -383,7 +412,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         // Mobiles that kept their pose take the same update, from the delta segments near them.
         const float tail = crossingTail();
         for (std::uint32_t r = 0; r < receivers.size(); ++r) {
-            if (!receivers[r].mobile || mIsMoved[r]) continue;
+            if (!receivers[r].mobile || mIsMoved[r] || !mActive[r]) continue;
             const Aabb box = discBounds(r);
             const Entity skipped = leavingSkippedFrom(r);
             for (const DeltaPart& part : mDeltaParts) {
@@ -435,7 +464,7 @@ void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& 
         return;
     }
     // Rigid mobiles keep their triangles' areas: only changed impacts count.
-    if (delta.paths.empty() && delta.relabels.empty()) return;
+    if (delta.paths.empty() && delta.relabels.empty() && mMoved.empty()) return;
     mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
     // Kept landings that slid onto another triangle of the same face.
     for (const PhotonRelabel& r : delta.relabels) {
@@ -454,6 +483,9 @@ void DetpIrradianceSystem::updateImpacts(Registry& registry, const PhotonStore& 
                     mSegmentList.push_back(s);
         mImpacts.accumulate(mReceivers, segments, mSegmentList, before ? -1.0 : 1.0);
     }
+    // A mobile taken out lost every impact above; clearing its sums drops the rounding left.
+    for (const std::uint32_t r : mMoved)
+        if (!mActive[r]) mImpacts.clearTriangles(mReceivers.receivers()[r]);
     if (mImpacts.maxUpdates() >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
     mImpacts.takeTouchedVertices(mTouched);
     for (const std::uint32_t v : mTouched)
@@ -498,13 +530,18 @@ void DetpIrradianceSystem::updatePhotonMap(Registry& registry, const PhotonStore
         }
         mPhotonMap.build(std::move(photons));
         estimatePhotonMap(0, std::uint32_t(mReceivers.vertexCount()));
+        for (std::uint32_t r = 0; r < mActive.size(); ++r)
+            if (!mActive[r]) clearReceiver(r);
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
         publishAll(registry);
         return;
     }
     for (const std::uint32_t r : mMoved) {
         const auto& receiver = mReceivers.receivers()[r];
-        estimatePhotonMap(receiver.firstVertex, receiver.vertexCount);
+        if (mActive[r])
+            estimatePhotonMap(receiver.firstVertex, receiver.vertexCount);
+        else
+            clearReceiver(r);
         mReceivers.publishReceiver(registry, mIrradiance, r);
         mStats.verticesWritten += receiver.vertexCount;
     }

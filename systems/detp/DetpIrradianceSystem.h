@@ -39,7 +39,9 @@ struct PhotonSegments;
  *   - the vertices of a mobile that moved (its WorldTransform changed, or it is in
  *     PhotonDelta::movedMobiles) are re-estimated in full at the new pose from the segments of
  *     the paths the PhotonPathGrid finds near the mobile, so the whole ray set is never
- *     scanned. Without a PhotonPathGrid resource every stored path is a candidate.
+ *     scanned. Without a PhotonPathGrid resource every stored path is a candidate;
+ *   - a mobile taken out of the light (MobileMesh::active) holds zero until it is put back,
+ *     which re-estimates it like a move. The same holds for the comparison estimators.
  *  A segment that starts on a convex mobile (ReceiverSet::Receiver::convex) is not traced
  *  through that mobile's discs, in full estimates and deltas alike: it cannot cross one from the
  *  front, save from an origin lifted a hair off the surface or lying on a disc's plane, and
@@ -67,7 +69,8 @@ struct PhotonSegments;
  *  modes.
  *
  *  Reads:  ctx<const PhotonStore>, ctx<const PhotonDelta>, ctx<const PhotonPathGrid> (when
- *          present), const WorldTransform (and its change list), const MobileMesh;
+ *          present), const WorldTransform and const MobileMesh (and their change lists),
+ *          ctx<const RayScene> (which mobiles are active, when present);
  *          build(): also const StaticMesh, const Mesh, const Name, ctx<RayScene> (its device),
  *          ctx<const SceneInfo> (default radius)
  *  Writes: VertexIrradiance (irradiance and dirty ranges; emplaced by build())          */
@@ -110,7 +113,13 @@ public:
     const FrameStats& lastFrame() const { return mStats; }
 
 private:
+    /// The mobiles whose pose or MobileMesh::active changed (mMoved); keeps mActive.
     void collectMovedMobiles(const Registry& registry, const PhotonDelta& delta);
+    /// Whether `mobile` is in the light: the RayScene's view when it holds the mobile (the
+    /// photons were traced against it), else MobileMesh::active.
+    static bool mobileActive(const Registry& registry, Entity mobile);
+    /// Zeroes a receiver's sums and irradiance.
+    void clearReceiver(std::uint32_t receiver);
     Aabb discBounds(std::uint32_t receiver) const;
     /// The entity whose leaving segments the receiver's discs skip: itself when it is a convex
     /// mobile (ReceiverSet::Receiver::convex: they cannot cross its discs from the front), else
@@ -138,9 +147,10 @@ private:
     void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
                          const PhotonSegments& segments, std::span<const std::uint32_t> indices,
                          std::span<const float> beyond, double sign, bool incremental);
-    /// Re-estimates the listed mobile receivers in full against the current ray set.
+    /// Re-estimates the listed mobile receivers in full against the current ray set; inactive
+    /// ones are zeroed.
     void estimateMobiles(const Registry& registry, const PhotonStore& store,
-                         std::span<const std::uint32_t> mobiles);
+                         std::span<const std::uint32_t> requested);
     void updateImpacts(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
                        bool full);
     void updatePhotonMap(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
@@ -180,6 +190,10 @@ private:
     std::vector<float> mBeyondList;
     std::vector<std::uint32_t> mMoved;  ///< receiver indices of mobiles that moved
     std::vector<std::uint8_t> mIsMoved; ///< per receiver
+    /// Per receiver: in the light (static meshes always; mobiles per MobileMesh::active as the
+    /// RayScene holds it). An inactive mobile's vertices hold zero and are not estimated.
+    std::vector<std::uint8_t> mActive;
+    std::vector<std::uint32_t> mEstimated;  ///< estimateMobiles: the active ones it was given
     std::vector<std::uint8_t> mSkipsDirect; ///< per store light: its first segments do not count
     std::vector<std::uint32_t> mSegmentList;
     std::vector<std::uint32_t> mCandidatePaths;

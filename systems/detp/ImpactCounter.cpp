@@ -82,6 +82,18 @@ void ImpactCounter::moveImpact(const ReceiverSet& receivers, Entity hit, std::ui
     add(receiver.firstTriangle + to, power, 1.0);
 }
 
+void ImpactCounter::clearTriangles(const ReceiverSet::Receiver& receiver) {
+    for (std::uint32_t t = receiver.firstTriangle;
+         t < receiver.firstTriangle + receiver.triangleCount; ++t) {
+        mTrianglePower[t] = glm::dvec3(0.0);
+        mUpdateCount[t] = 0;
+        if (!mTriangleTouched[t]) {
+            mTriangleTouched[t] = 1;
+            mTouchedTriangles.push_back(t);
+        }
+    }
+}
+
 void ImpactCounter::takeTouchedVertices(std::vector<std::uint32_t>& out) {
     out.clear();
     for (const std::uint32_t t : mTouchedTriangles) {

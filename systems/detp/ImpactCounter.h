@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/ecs/Entity.h"
+#include "systems/detp/ReceiverSet.h"
 
 #include <glm/vec3.hpp>
 
@@ -10,7 +11,6 @@
 
 namespace qgi {
 
-class ReceiverSet;
 struct PhotonSegments;
 
 /** Impact count (seed 000 sections 3.5 and 3.6.1), kept for comparison with DETP.
@@ -35,6 +35,11 @@ public:
     /// (PhotonDelta::relabels).
     void moveImpact(const ReceiverSet& receivers, Entity hit, std::uint32_t from, std::uint32_t to,
                     const glm::vec3& power);
+
+    /// Zeroes the sums of `receiver`'s triangles (a mobile taken out of the light: its impacts
+    /// were all subtracted, and this drops the rounding they left); its vertices count as
+    /// touched.
+    void clearTriangles(const ReceiverSet::Receiver& receiver);
 
     /// The vertices around triangles that accumulate() changed since the last call, ascending;
     /// forgets them.

@@ -358,6 +358,49 @@ TEST(ImpactCount, EnergyBookkeepingThroughAddAndSubtract) {
     EXPECT_GT(expected().x, 100.0);
 }
 
+TEST(ImpactCount, AMobileTakenOutOfTheLightHoldsExactlyZero) {
+    // Impacts of 1, 1e8 and 0.01 W on one plate triangle, subtracted in the order they were
+    // added, leave 5.6e-9 W in double. The plate is taken out of the light in that frame
+    // (MobileMesh::active): it must read zero, not the rounding.
+    ImpactWorld world;
+    Registry& registry = world.registry;
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    for (const float power : {1.f, 1e8f, 0.01f}) {
+        store.paths.push_back({std::uint32_t(store.segments.size()), 1, 0});
+        pushSegment(store.segments, {}, {0.f, -1.f, 0.f}, 1.f, glm::vec3(power), world.plate, 0, 0);
+    }
+    DetpSettings settings;
+    settings.estimator = IrradianceEstimator::ImpactCount;
+    settings.discRadius = 0.05f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    registry.clearChanges();
+    const auto& plate = registry.get<VertexIrradiance>(world.plate).irradiance;
+    ASSERT_GT(plate[0].x, 0.f); // triangle 0's corner
+
+    // Every path leaves the scene instead, and the plate is out.
+    PhotonDelta& delta = registry.ctx().get<PhotonDelta>();
+    delta = PhotonDelta{};
+    delta.oldFirst = {0};
+    delta.newFirst = {0};
+    for (std::uint32_t p = 0; p < 3; ++p) {
+        delta.paths.push_back(p);
+        delta.oldSegments.appendFrom(store.segments, store.paths[p].first);
+        pushSegment(delta.newSegments, {}, {0.f, 1.f, 0.f}, kInf, glm::vec3(1.f), {}, 0, 0);
+        delta.oldFirst.push_back(p + 1);
+        delta.newFirst.push_back(p + 1);
+        store.paths[p].first = std::uint32_t(store.segments.size());
+        store.segments.appendFrom(delta.newSegments, p);
+    }
+    delta.movedMobiles = {world.plate};
+    registry.patch<MobileMesh>(world.plate).active = false;
+    system.update(registry, {});
+    ASSERT_FALSE(system.lastFrame().full);
+    for (std::size_t v = 0; v < plate.size(); ++v)
+        EXPECT_EQ(plate[v], glm::vec3(0.f)) << "vertex " << v;
+}
+
 TEST(ImpactCount, VertexIsTheAreaWeightedMeanOfItsTriangles) {
     ImpactWorld world;
     ImpactCounter counter;

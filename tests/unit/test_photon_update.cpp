@@ -10,7 +10,9 @@
 #include "components/VertexIrradiance.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
+#include "runtime/scene/MeshProcessing.h"
 #include "systems/detp/DetpIrradianceSystem.h"
+#include "systems/detp/DiscCrossing.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/photon_update/PhotonTracer.h"
@@ -387,6 +389,155 @@ TEST(PhotonUpdate, MobilesTakenOutAndPutBackRetraceExactlyTheirPathsAndMatchAFul
     EXPECT_FALSE(deltaOf(registry).full);
     EXPECT_TRUE(sameStore(storeOf(registry), first));
 }
+
+/// Irradiance estimators following mobiles taken out and put back, frame by frame.
+class MobilesTakenOut : public ::testing::TestWithParam<IrradianceEstimator> {};
+
+TEST_P(MobilesTakenOut, IrradianceEqualsAFullEstimateEveryFrameAndAnInactiveMobileIsDark) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    // Mobiles with vertices on their faces, not only at their corners: discs photons cross.
+    MeshProcessingOptions refine;
+    refine.maxEdgeLength = 0.1f;
+    for (const Entity mobile : {room.cube, room.crate})
+        registry.get<Mesh>(mobile) = processMesh(registry.get<Mesh>(mobile), refine);
+    buildRayScene(registry);
+    PhotonUpdateSystem photons(settingsWith(20'000));
+    photons.update(registry, FrameContext{});
+    DetpSettings settings;
+    settings.estimator = GetParam();
+    settings.discRadius = 0.05f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, FrameContext{});
+    registry.clearChanges();
+    const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
+
+    // Rounding bounds (DETP: a vertex's double sum of n additions of at most p W a channel is
+    // within n^2 p 2^-53 of the exact sum, so two such sums within twice that, over pi r^2;
+    // impact count: the same per triangle, at most 6 triangles over a ring of at least the
+    // smallest triangle's area; the photon map re-estimates from scratch: exact), then one
+    // rounding to float each way (2^-23 relative).
+    double additions = double(storeOf(registry).segments.size()), power = 0.0;
+    const auto notePower = [&](const PhotonSegments& segments) {
+        for (std::size_t s = 0; s < segments.size(); ++s)
+            for (int c = 0; c < 3; ++c)
+                power = std::max(power, double(segments.power[s][c]));
+    };
+    notePower(storeOf(registry).segments);
+    double smallestTriangle = 1e30;
+    for (const Entity e : meshes) {
+        const Mesh& mesh = registry.get<Mesh>(e);
+        for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
+            const glm::vec3 a = mesh.positions[mesh.indices[t]];
+            smallestTriangle = std::min(
+                smallestTriangle,
+                0.5 * double(glm::length(glm::cross(mesh.positions[mesh.indices[t + 1]] - a,
+                                                    mesh.positions[mesh.indices[t + 2]] - a))));
+        }
+    }
+    const auto expectFullEstimate = [&](int frame) {
+        const double sums = 2.0 * additions * additions * power * 0x1p-53;
+        const double absolute =
+            GetParam() == IrradianceEstimator::Detp ? sums / (glm::pi<double>() * 0.05 * 0.05)
+            : GetParam() == IrradianceEstimator::ImpactCount ? 6.0 * sums / smallestTriangle
+                                                             : 0.0;
+        std::vector<std::vector<glm::vec3>> incremental;
+        for (const Entity e : meshes)
+            incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
+        DetpIrradianceSystem reference(settings);
+        reference.build(registry);
+        reference.update(registry, FrameContext{});
+        for (std::size_t m = 0; m < meshes.size(); ++m) {
+            auto& full = registry.get<VertexIrradiance>(meshes[m]).irradiance;
+            for (std::size_t v = 0; v < full.size(); ++v)
+                for (int c = 0; c < 3; ++c)
+                    ASSERT_NEAR(incremental[m][v][c], full[v][c],
+                                std::ldexp(double(full[v][c]), -23) + absolute)
+                        << registry.get<Name>(meshes[m]).value << " vertex " << v << ", frame "
+                        << frame;
+            full = incremental[m]; // the incremental system goes on from its own values
+        }
+        registry.clearChanges();
+    };
+
+    // Every case: out where it stands, moved while another is out, back elsewhere, moved
+    // while out, back where it is, both out, both back, one out at the end.
+    struct Step {
+        Entity mobile;
+        std::optional<glm::vec3> moveTo;
+        std::optional<bool> active;
+    };
+    const glm::vec3 elsewhere(0.3f, -1.25f, 0.6f);
+    // 5 cm from the cube's side: the crate's re-traced paths pass where the cube's discs are.
+    const glm::vec3 nextToCube(kCubeRest.x + 0.5f, kCrateRest.y, kCubeRest.z);
+    const std::vector<std::vector<Step>> frames{
+        {{room.cube, {}, false}},
+        {{room.crate, nextToCube, {}}},
+        {{room.crate, kCrateRest + glm::vec3(0.1f, 0.f, 0.f), {}}},
+        {{room.cube, elsewhere, true}},
+        {{room.crate, {}, false}, {room.cube, kCubeRest, {}}},
+        {{room.crate, kCrateRest + glm::vec3(-0.2f, 0.f, 0.3f), {}}},
+        {{room.crate, {}, true}},
+        {{room.cube, {}, false}, {room.crate, {}, false}},
+        {{room.cube, {}, true}, {room.crate, kCrateRest, true}},
+        {{room.crate, {}, false}}};
+    std::map<Entity, bool> active{{room.cube, true}, {room.crate, true}};
+    std::size_t passingOut = 0;
+    for (std::size_t f = 0; f < frames.size(); ++f) {
+        for (const Step& step : frames[f]) {
+            if (step.moveTo)
+                registry.patch<WorldTransform>(step.mobile).matrix = translation(*step.moveTo);
+            if (step.active)
+                registry.patch<MobileMesh>(step.mobile).active = active[step.mobile] = *step.active;
+        }
+        registry.ctx().get<RayScene>().syncMoved(registry);
+        photons.update(registry, FrameContext{f + 1, 0.0, 0.f, 0});
+        const PhotonDelta& delta = deltaOf(registry);
+        ASSERT_FALSE(delta.full);
+        additions +=
+            double(delta.oldSegments.size() + delta.newSegments.size() + 2 * delta.relabels.size());
+        notePower(delta.newSegments);
+        // Delta segments that cross the discs of a mobile that is out and stays put: the
+        // irradiance system must not count them (checked by the darkness below).
+        for (const Entity mobile : {room.cube, room.crate}) {
+            const bool stays = std::none_of(frames[f].begin(), frames[f].end(),
+                                            [&](const Step& s) { return s.mobile == mobile; });
+            if (active[mobile] || !stays) continue;
+            const Mesh& mesh = registry.get<Mesh>(mobile);
+            const glm::mat4& pose = registry.get<WorldTransform>(mobile).matrix;
+            for (const PhotonSegments* part : {&delta.oldSegments, &delta.newSegments})
+                for (std::size_t i = 0; i < part->size(); ++i)
+                    for (std::size_t v = 0; v < mesh.positions.size(); ++v)
+                        passingOut +=
+                            crossesDisc(part->origin[i], part->direction[i], part->length[i],
+                                        glm::vec3(pose * glm::vec4(mesh.positions[v], 1.f)),
+                                        glm::mat3(pose) * mesh.normals[v], 0.05f)
+                                ? 1
+                                : 0;
+        }
+        system.update(registry, FrameContext{f + 1, 0.0, 0.f, 0});
+        ASSERT_FALSE(system.lastFrame().full);
+        for (const Entity mobile : {room.cube, room.crate}) {
+            const auto& irradiance = registry.get<VertexIrradiance>(mobile).irradiance;
+            const bool dark = std::all_of(irradiance.begin(), irradiance.end(),
+                                          [](const glm::vec3& e) { return e == glm::vec3(0.f); });
+            EXPECT_EQ(dark, !active[mobile])
+                << registry.get<Name>(mobile).value << ", frame " << f + 1;
+        }
+        expectFullEstimate(int(f + 1));
+        if (HasFatalFailure()) return;
+    }
+    EXPECT_GT(passingOut, 10u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
+                         ::testing::Values(IrradianceEstimator::Detp,
+                                           IrradianceEstimator::ImpactCount,
+                                           IrradianceEstimator::PhotonMap),
+                         [](const auto& info) {
+                             return std::string(irradianceEstimatorName(info.param));
+                         });
 
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
     Registry incremental, baseline;
