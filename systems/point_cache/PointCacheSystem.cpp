@@ -108,7 +108,8 @@ void PointCacheSystem::build(Registry& registry) {
             for (const glm::vec3& p : mesh.positions)
                 box.extend(p);
             if (box.empty()) return;
-            mMobiles[e] = MobileBound{box.center(), 0.5f * glm::length(box.extent()), world.matrix};
+            mMobiles[e] = MobileBound{box.center(), 0.5f * glm::length(box.extent()), world.matrix,
+                                      registry.get<MobileMesh>(e).active};
         });
     mNeedsFull = true;
     mBuilt = true;
@@ -159,13 +160,17 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         float radiusBefore, radiusAfter;
     };
     std::vector<Move> moves;
-    for (const Entity e : registry.changed<WorldTransform>()) {
+    // Moved, taken out or put back (MobileMesh::active): both places, whether it is there
+    // now or not, which is conservative.
+    const auto follow = [&](Entity e) {
         const auto it = mMobiles.find(e);
-        if (it == mMobiles.end()) continue;
+        if (it == mMobiles.end()) return;
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);
-        if (!world) continue;
+        const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
+        if (!world || !mobile) return;
         MobileBound& m = it->second;
-        if (m.pose == world->matrix) continue; // patched without moving
+        if (m.pose == world->matrix && m.active == mobile->active) return; // nothing changed
+        m.active = mobile->active;
         Move move;
         move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));
         move.radiusBefore = m.radius * maxScale(m.pose);
@@ -173,7 +178,11 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         move.radiusAfter = m.radius * maxScale(world->matrix);
         m.pose = world->matrix;
         if (std::isfinite(move.after.x) && std::isfinite(move.radiusAfter)) moves.push_back(move);
-    }
+    };
+    for (const Entity e : registry.changed<WorldTransform>())
+        follow(e);
+    for (const Entity e : registry.changed<MobileMesh>())
+        follow(e);
     if (moves.empty() || cache.size() == 0) return;
     // Whether a segment from some x within h of q to a light passes a moved mobile (old or new
     // pose): moving an end of a segment by h moves each of its points by at most h, so

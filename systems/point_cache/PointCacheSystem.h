@@ -37,18 +37,18 @@ struct PhotonSegments;
  *     irradiance); otherwise the delta's old segments are subtracted and its new ones added
  *     (DETP is additive per segment): exact, cheap, and a point no delta segment crosses is
  *     not written;
- *   - soft shadows: for each mobile whose WorldTransform changed, every point from which the
- *     mobile's bounding sphere (at the old or the new pose) comes within a light's bounding
- *     radius of the segment to that light's centre (lights wholly below the point's horizon
- *     skipped) is queued, keyed by its distance to the
- *     mobile; then at most updateBudget queued points, nearest first (ties by index), are
- *     re-shaded with shadow rays; the rest wait for the next frames.
+ *   - soft shadows: for each mobile whose WorldTransform or MobileMesh::active changed, every
+ *     point from which the mobile's bounding sphere (at the old or the new pose) comes within
+ *     a light's bounding radius of the segment to that light's centre (lights wholly below
+ *     the point's horizon skipped) is queued, keyed by its distance to the mobile; then at
+ *     most updateBudget queued points, nearest first (ties by index), are re-shaded with
+ *     shadow rays; the rest wait for the next frames.
  *  Shading uses random numbers keyed by the point, never by the frame: identical frames give
  *  bit-identical values, and a point that is not refreshed keeps its value exactly.
  *
  *  Reads:  ctx<RayScene>, ctx<const PhotonStore>, ctx<const PhotonDelta> (when present),
- *          const StaticMesh, const MobileMesh, const Mesh, const Material, const
- *          WorldTransform (and its change list), lights (cache key, particles)
+ *          const StaticMesh, const MobileMesh and const WorldTransform (and their change
+ *          lists), const Mesh, const Material, lights (cache key, particles)
  *  Writes: ctx<PointCache> (emplaced by build(); shading arrays each frame), the cache file */
 class PointCacheSystem {
 public:
@@ -95,6 +95,7 @@ private:
         glm::vec3 centre{0.f}; ///< object space
         float radius = 0.f;    ///< object space
         glm::mat4 pose{1.f};   ///< last pose seen
+        bool active = true;    ///< last MobileMesh::active seen
     };
 
     PointCacheSettings mSettings; ///< as given; resolved ones live in the PointCache

@@ -121,7 +121,11 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
                 irradiance->dirty.push_back({0, std::uint32_t(irradiance->irradiance.size())});
         }
         if (!gpuMesh.vertexArray) return; // rejected until its Mesh changes
-        if (registry.wasChanged<WorldTransform>(e)) casterChanged = true;
+        if (registry.wasChanged<WorldTransform>(e) || registry.wasChanged<MobileMesh>(e))
+            casterChanged = true;
+        // Out of the world for now: not drawn, casts no shadow (its GPU mesh stays for later).
+        if (const MobileMesh* mobile = registry.tryGet<MobileMesh>(e); mobile && !mobile->active)
+            return;
 
         DrawItem& item = mItems.emplace_back();
         item.mesh = &gpuMesh;

@@ -26,8 +26,10 @@ struct GpuResources;
  *  Spot cones fall off as glTF KHR_lights_punctual suggests (see shaders/common/lighting.glsl).
  *  Meshes reach the GPU lazily and are rebuilt when their Mesh is patched; only the dirty
  *  ranges of VertexIrradiance are uploaded each frame. Shadow maps keep the depth of static
- *  casters; MobileMesh and Avatar entities are redrawn over it in the maps that see them.
- *  Reads:  const Camera, const WorldTransform, const Mesh, const Material, const MobileMesh,
+ *  casters; MobileMesh and Avatar entities are redrawn over it in the maps that see them. A
+ *  mobile taken out (MobileMesh::active false) is neither drawn nor casts shadows.
+ *  Reads:  const Camera, const WorldTransform, const Mesh, const Material, const MobileMesh
+ *          (and its change list),
  *          const Avatar, const ShLighting, const PointLight, const SpotLight,
  *          const DirectionalLight, const Name (logs), ctx<const TextureLibrary>,
  *          ctx<FrameProfiler> (pass times)

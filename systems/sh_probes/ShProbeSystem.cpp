@@ -430,10 +430,17 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         return;
     }
 
-    // Moved mobiles: their old and new bounds.
+    // Moved mobiles, and mobiles taken out or put back (MobileMesh::active): their old and new
+    // bounds.
     const ProbeGrid& grid = mVolume->grid();
-    if (!mSettings.hybrid && !registry.changed<WorldTransform>().empty()) snapshotLights(registry);
-    for (const Entity e : registry.changed<WorldTransform>()) {
+    if (!mSettings.hybrid &&
+        (!registry.changed<WorldTransform>().empty() || !registry.changed<MobileMesh>().empty()))
+        snapshotLights(registry);
+    mChangedMobiles.assign(registry.changed<WorldTransform>().begin(),
+                           registry.changed<WorldTransform>().end());
+    mChangedMobiles.insert(mChangedMobiles.end(), registry.changed<MobileMesh>().begin(),
+                           registry.changed<MobileMesh>().end());
+    for (const Entity e : mChangedMobiles) {
         const auto it = mMobiles.find(e);
         if (it == mMobiles.end()) continue;
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);

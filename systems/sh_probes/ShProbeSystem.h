@@ -47,7 +47,8 @@ class RayScene;
  *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments,
  *     old and new, the only places where per-vertex irradiance can have changed, wherever at
  *     least minDeltaEndPoints of them fall in one half-spacing cell;
- *   - near a moved mobile's old or new world bounds: within influenceDistance, or as far as
+ *   - near a moved mobile's old or new world bounds (or its bounds, when it was taken out or
+ *     put back: MobileMesh::active): within influenceDistance, or as far as
  *     its bounding sphere covers mobileSolidAngleShare of a probe's sphere of directions
  *     (what it hides, shows or bleeds onto changed; the visibility masks of cells it
  *     overlaps are dropped); in photon mode also the probes whose shadow ray to a light
@@ -63,7 +64,8 @@ class RayScene;
  *  visit of a cell, spacing / visibilitySubdivisions apart), written to ShLighting.
  *
  *  Reads:  const Avatar, const WorldTransform (and its change list), const Mesh,
- *          const Material (and its change list), const MobileMesh, const VertexIrradiance,
+ *          const Material (and its change list), const MobileMesh (and its change list),
+ *          const VertexIrradiance,
  *          const PointLight, const SpotLight, const DirectionalLight, const LightStandIn,
  *          ctx<const RayScene>, ctx<const SceneInfo>, ctx<const PhotonDelta> (when present),
  *          ctx<FrameProfiler> (sub-scopes, when present)
@@ -160,6 +162,7 @@ private:
     ProbeVolume* mVolume = nullptr;
     glm::vec3 mEnvironment{0.f};
     std::unordered_map<Entity, Mobile> mMobiles;
+    std::vector<Entity> mChangedMobiles; ///< markChanges: moved, taken out or put back
     std::vector<std::uint8_t> mStale;
     std::size_t mStaleCount = 0;
     FrameStats mStats;

@@ -345,6 +345,35 @@ TEST_F(RenderTest, MovingMobileRefreshesOnlyItsShadows) {
     expectMatchesReference("cornell_mobile", renderer.readHdr(), scene.reference());
 }
 
+TEST_F(RenderTest, AnInactiveMobileRendersAsIfItWereNotThere) {
+    // The block is a mobile. Taken out (MobileMesh::active), the frame must be the one drawn
+    // with the block destroyed: no block, no shadow of it. Put back, the first frame again.
+    SceneBuilder scene(mWorld);
+    const Entity block = buildCornellBox(scene);
+    mWorld.emplace<MobileMesh>(block);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer);
+    const ImageF in = renderer.readHdr();
+    mWorld.patch<MobileMesh>(block).active = false;
+    renderFrames(renderer);
+    const ImageF out = renderer.readHdr();
+    mWorld.patch<MobileMesh>(block).active = true;
+    renderFrames(renderer);
+    const ImageF back = renderer.readHdr();
+    mWorld.destroy(block);
+    renderFrames(renderer);
+    const ImageF gone = renderer.readHdr();
+
+    EXPECT_TRUE(out.rgba == gone.rgba);
+    EXPECT_TRUE(back.rgba == in.rgba);
+    // The block covers part of the image and shadows more of it.
+    std::size_t differing = 0;
+    for (std::size_t i = 0; i < in.rgba.size(); i += 4)
+        differing += in.rgba[i] != gone.rgba[i] ? 1 : 0;
+    EXPECT_GT(differing, in.rgba.size() / 4 / 20);
+}
+
 // The committed reference EXR must be exactly what the CPU reference computes today, so the
 // golden file is backed by the independent math, not by the renderer.
 // Regenerate with QGI_WRITE_REFERENCE=1 (and look at the image before committing it).

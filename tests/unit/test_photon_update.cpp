@@ -535,8 +535,8 @@ INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
                          ::testing::Values(IrradianceEstimator::Detp,
                                            IrradianceEstimator::ImpactCount,
                                            IrradianceEstimator::PhotonMap),
-                         [](const auto& info) {
-                             return std::string(irradianceEstimatorName(info.param));
+                         [](const auto& test) {
+                             return std::string(irradianceEstimatorName(test.param));
                          });
 
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {

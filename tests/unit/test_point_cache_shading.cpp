@@ -2,6 +2,7 @@
 // file, the per-frame update.
 #include "components/Material.h"
 #include "components/Mesh.h"
+#include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
@@ -457,6 +458,50 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
               0);
     EXPECT_EQ(cache.radius, before.radius);
     EXPECT_EQ(cache.ao, before.ao);
+}
+
+TEST(PointCacheUpdate, ABlockerTakenOutAndPutBackDrainsToFreshShadows) {
+    ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
+    PointCacheSettings settings;
+    settings.rMin = 0.06f;
+    settings.rMax = 0.25f;
+    settings.particleCount = 512;
+    settings.stopAfterRejections = 2000;
+    settings.updateBudget = 40;
+    PointCacheSystem system(settings);
+    system.build(scene.registry);
+    const PointCache& cache = scene.registry.ctx().get<PointCache>();
+    system.update(scene.registry, FrameContext{});
+    scene.registry.clearChanges();
+    const PointCache before = cache;
+    RayScene& rays = scene.registry.ctx().get<RayScene>();
+
+    // Each switch queues the points it may shadow; once drained, every point holds what a
+    // fresh shading of the scene as it is gives: the light unblocked, then the first values.
+    std::uint64_t frame = 1;
+    for (const bool active : {false, true}) {
+        scene.registry.patch<MobileMesh>(scene.blocker).active = active;
+        rays.syncMoved(scene.registry);
+        system.update(scene.registry, FrameContext{frame++});
+        scene.registry.clearChanges();
+        EXPECT_GT(system.lastFrame().queued, settings.updateBudget);
+        while (system.lastFrame().pending > 0 && frame < 400)
+            system.update(scene.registry, FrameContext{frame++});
+        ASSERT_EQ(system.lastFrame().pending, 0u);
+        std::size_t mismatches = 0, unchanged = 0;
+        for (std::size_t p = 0; p < cache.size(); ++p) {
+            const LightSample s =
+                shadeAreaLight(rays, system.areaLights()[0], 0, cache.position[p], cache.normal[p],
+                               cache.settings.shadowSamples, cache.settings.seed, cache.dart[p]);
+            mismatches += std::memcmp(&s.irradiance, &cache.direct[p], sizeof(glm::vec3)) != 0;
+            unchanged += cache.direct[p] == before.direct[p] ? 1 : 0;
+        }
+        EXPECT_EQ(mismatches, 0u) << (active ? "put back" : "taken out");
+        if (active)
+            EXPECT_EQ(unchanged, cache.size());
+        else
+            EXPECT_GT(cache.size() - unchanged, 10u); // its shadow went
+    }
 }
 
 TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {

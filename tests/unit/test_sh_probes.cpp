@@ -8,6 +8,7 @@
 #include "components/Avatar.h"
 #include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
+#include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/ShLighting.h"
 #include "components/SpotLight.h"
@@ -690,6 +691,54 @@ TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
         if (!sameSh(before[p], after[p])) {
             EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
         }
+}
+
+TEST(ShProbes, AMobileTakenOutAndPutBackRefreshesItsRegion) {
+    MobileRoom room(100000);
+    const auto before = room.probes();
+    const auto setActive = [&](bool active, std::uint64_t frame) {
+        room.world.patch<MobileMesh>(room.cube).active = active;
+        room.world.ctx().get<RayScene>().syncMoved(room.world);
+        room.system.update(room.world, FrameContext{frame});
+        room.world.clearChanges();
+    };
+    setActive(false, 1);
+    const auto out = room.probes();
+    EXPECT_EQ(room.system.staleCount(), 0u);
+
+    // Changed probes lie in the region of the cube's box (the rule of the test above), and
+    // equal a fresh projection of the volume without the cube.
+    const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
+    const Aabb box{glm::vec3(-1.5f, 0.3f, 0.f) - 0.2f, glm::vec3(-1.5f, 0.3f, 0.f) + 0.2f};
+    const float rho = 0.5f * glm::length(glm::vec3(0.4f));
+    const float reach = std::max(room.system.influenceDistance(),
+                                 rho / (2.f * std::sqrt(ShProbeSettings{}.mobileSolidAngleShare)));
+    const glm::vec3 light(0.f, 1.8f, 0.f);
+    std::size_t changed = 0;
+    for (std::uint32_t p = 0; p < before.size(); ++p) {
+        if (sameSh(before[p], out[p])) continue;
+        ++changed;
+        const glm::vec3 x = grid.position(p);
+        const glm::vec3 d = x - glm::clamp(x, box.min, box.max);
+        EXPECT_TRUE(glm::length(d) <= reach + 1e-4f || segmentCrossesBox(x, light, box))
+            << "probe " << p << " changed outside the cube's region";
+    }
+    EXPECT_GT(changed, 10u);
+    room.system.projectAll(room.world);
+    const auto fresh = room.probes();
+    for (std::uint32_t p = 0; p < before.size(); ++p)
+        if (!sameSh(before[p], out[p])) {
+            EXPECT_TRUE(sameSh(out[p], fresh[p])) << "probe " << p;
+        }
+
+    // Back in (from the incremental state, not the fresh one): every probe as it was, bit for
+    // bit (projections are seeded by the probe).
+    for (std::uint32_t p = 0; p < out.size(); ++p)
+        room.world.ctx().get<ProbeVolume>().coefficients(p) = out[p];
+    setActive(true, 2);
+    const auto back = room.probes();
+    for (std::uint32_t p = 0; p < before.size(); ++p)
+        EXPECT_TRUE(sameSh(back[p], before[p])) << "probe " << p;
 }
 
 TEST(ShProbes, UpdateBudgetIsRespectedNearestAvatarFirst) {
