@@ -15,8 +15,10 @@ PlyMesh gatherVertexIrradiance(const Registry& registry) {
     PlyMesh out;
     registry.view<const Mesh, const WorldTransform>().each(
         [&](Entity e, const Mesh& mesh, const WorldTransform& world) {
-            const bool mobile = registry.has<MobileMesh>(e);
+            const MobileMesh* mobileMesh = registry.tryGet<MobileMesh>(e);
+            const bool mobile = mobileMesh != nullptr;
             if (!mobile && !registry.has<StaticMesh>(e)) return;
+            if (mobile && !mobileMesh->active) return; // out of the world
             const auto* irradiance = registry.tryGet<VertexIrradiance>(e);
             const auto base = std::uint32_t(out.positions.size());
             const glm::mat3 normalMatrix = glm::transpose(glm::inverse(glm::mat3(world.matrix)));
@@ -27,7 +29,8 @@ PlyMesh gatherVertexIrradiance(const Registry& registry) {
                 out.irradiance.push_back(known ? irradiance->irradiance[v] : glm::vec3(0.f));
                 out.mobile.push_back(mobile ? 1 : 0);
             }
-            for (std::uint32_t index : mesh.indices) out.triangles.push_back(base + index);
+            for (std::uint32_t index : mesh.indices)
+                out.triangles.push_back(base + index);
         });
     return out;
 }

@@ -9,7 +9,8 @@ namespace qgi {
 
 /// Gathers every StaticMesh and MobileMesh vertex in world space with its VertexIrradiance
 /// (zero where an entity has none) and mobile flag, and the triangles, entity after entity in
-/// registry order. Avatars are not included: they are lit by SH probes, not per vertex.
+/// registry order. Avatars are not included: they are lit by SH probes, not per vertex; nor
+/// are mobiles out of the world (MobileMesh::active false).
 PlyMesh gatherVertexIrradiance(const Registry& registry);
 
 /// Writes gatherVertexIrradiance as PLY (header documented in Ply.h). Throws qgi::Error.

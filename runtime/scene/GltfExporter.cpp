@@ -7,7 +7,8 @@
 //    TEXCOORD_0 when present, UNSIGNED_INT indices) with its own material; all data lives in one
 //    buffer, embedded as base64 in a .gltf or as the BIN chunk of a .glb.
 //  - node extras say {"mobility": "static" | "mobile"} or {"avatar": true} on every mesh node,
-//    so no tag depends on inheritance, and {"pointCache": true} on PointCacheShaded ones.
+//    so no tag depends on inheritance, {"pointCache": true} on PointCacheShaded ones and
+//    {"active": false} on mobiles out of the world.
 //  - a PathFollower becomes LINEAR translation and rotation channels of one animation, with its
 //    loop and time offset in the node's extras {"qgiPath": {...}}.
 //  - emission above 1 is split into emissiveFactor (max component 1) and
@@ -182,6 +183,8 @@ tinygltf::Value mobilityExtras(const Registry& registry, Entity e) {
     const char* mobility = registry.has<MobileMesh>(e) ? "mobile" : "static";
     Object extras{{"mobility", tinygltf::Value(std::string(mobility))}};
     if (registry.has<PointCacheShaded>(e)) extras["pointCache"] = tinygltf::Value(true);
+    if (const MobileMesh* mobile = registry.tryGet<MobileMesh>(e); mobile && !mobile->active)
+        extras["active"] = tinygltf::Value(false);
     return tinygltf::Value(std::move(extras));
 }
 

@@ -436,6 +436,16 @@ bool GltfReader::nodePointCache(int index) const {
     return value.Get<bool>();
 }
 
+bool GltfReader::nodeActive(int index) const {
+    const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
+    if (!extras.IsObject() || !extras.Has("active")) return true;
+    const std::string field = str("nodes[", index, "].extras.active");
+    const tinygltf::Value& value = extras.Get("active");
+    if (!value.IsBool()) fail(field, "must be true or false");
+    if (mModel.nodes[std::size_t(index)].mesh == -1) fail(field, "set on a node without a mesh");
+    return value.Get<bool>();
+}
+
 std::optional<Mobility> GltfReader::nodeMobility(int index) const {
     const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
     if (!extras.IsObject()) return std::nullopt;
@@ -520,6 +530,10 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
             record.pointCacheShaded = nodePointCache(index);
             if (record.pointCacheShaded && record.mobility != Mobility::Static)
                 fail(field + ".extras.pointCache", "the point cache shades static meshes only");
+            record.active = nodeActive(index);
+            if (!record.active && record.mobility != Mobility::Mobile)
+                fail(field + ".extras.active",
+                     "only a mobile mesh can be out of the world (set \"mobility\": \"mobile\")");
             records.push_back(std::move(record));
         }
         if (node.mesh != -1 && !hidden) {
@@ -540,6 +554,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
                     primitive.world = records[std::size_t(self)].world;
                     primitive.mobility = records[std::size_t(self)].mobility;
                     primitive.pointCacheShaded = records[std::size_t(self)].pointCacheShaded;
+                    primitive.active = records[std::size_t(self)].active;
                     primitive.source = &(*raw)[p];
                     primitive.primitiveOnly = true;
                     records.push_back(std::move(primitive));
@@ -737,7 +752,7 @@ void populate(Registry& registry, ImportedScene& scene) {
                 if (r.pointCacheShaded) registry.emplace<PointCacheShaded>(e);
                 break;
             case Mobility::Mobile:
-                registry.emplace<MobileMesh>(e);
+                registry.emplace<MobileMesh>(e, MobileMesh{r.active});
                 break;
             case Mobility::Avatar:
                 registry.emplace<Avatar>(e, r.avatarRadius);

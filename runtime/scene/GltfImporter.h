@@ -23,8 +23,9 @@
  *  - Node extras: {"mobility": "static" | "mobile"} and {"avatar": true}, inherited from the
  *    nearest ancestor that says either; default static. Mesh entities get StaticMesh, MobileMesh
  *    or Avatar (radius: half the diagonal of the mesh's world bounds). {"pointCache": true} on a
- *    static mesh node (not inherited) adds PointCacheShaded; {"standIn": true} on a light node
- *    adds LightStandIn.
+ *    static mesh node (not inherited) adds PointCacheShaded; {"active": false} on a mobile mesh
+ *    node (not inherited) imports it out of the world (MobileMesh::active: a pooled object);
+ *    {"standIn": true} on a light node adds LightStandIn.
  *  - Animations: translation and rotation channels become a looping PathFollower on their
  *    node (keys at every time of either channel; LINEAR blends, STEP holds, CUBICSPLINE keeps
  *    its values and blends them linearly; all animations of the file play together). Scale

@@ -77,6 +77,7 @@ struct EntityRecord {
     Light light;
     bool lightStandIn = false;        ///< node extras {"standIn": true}: see LightStandIn
     bool pointCacheShaded = false;    ///< node extras {"pointCache": true}: see PointCacheShaded
+    bool active = true;               ///< node extras {"active": false}: see MobileMesh::active
     std::optional<PathFollower> path; ///< from the file's animations (readAnimations)
     Mobility mobility = Mobility::Static;
     const RawPrimitive* source = nullptr; ///< the primitive this entity draws, if any
@@ -213,6 +214,8 @@ private:
     std::optional<Mobility> nodeMobility(int index) const;
     bool nodeStandIn(int index) const;
     bool nodePointCache(int index) const;
+    /// Node extras {"active": bool} (default true), on a node with a mesh.
+    bool nodeActive(int index) const;
     int nodeLight(int index) const;
     /// One record per node below `roots` (and per primitive of multi-primitive meshes).
     std::vector<EntityRecord> traverse(const std::vector<int>& roots);

@@ -57,6 +57,8 @@ const BadCase kCases[] = {
     {"bad_base64.gltf", "buffers[0].uri", "invalid base64"},
     {"unknown_mobility.gltf", "nodes[0].extras.mobility", "'flying'"},
     {"point_cache_not_bool.gltf", "nodes[0].extras.pointCache", "true or false"},
+    {"active_not_bool.gltf", "nodes[0].extras.active", "true or false"},
+    {"active_on_static.gltf", "nodes[0].extras.active", "mobile"},
     {"light_intensity_string.gltf", "extensions.KHR_lights_punctual.lights[0].intensity",
      "not a finite number"},
     {"light_too_bright.gltf", "extensions.KHR_lights_punctual.lights[0].intensity", "from 0 to"},

@@ -82,7 +82,7 @@ void buildScene(Registry& r) {
     const Entity door = addNode(r, "Door", doorPose);
     r.emplace<Mesh>(door, quad());
     r.emplace<Material>(door, Material{{0.9f, 0.8f, 0.7f}, {0.5f, 0.25f, 0.f}, 0.f, 1.f, -1});
-    r.emplace<MobileMesh>(door);
+    r.emplace<MobileMesh>(door, MobileMesh{false}); // pooled: out of the world for now
     // The door swings on a scripted path (keys in the parent's frame), once, late.
     PathFollower swing;
     swing.keys = {{0.f, doorPose.translation, doorPose.rotation},
@@ -206,6 +206,9 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
         EXPECT_EQ(m.baseColorTexture, expected.baseColorTexture);
         EXPECT_EQ(imported.has<StaticMesh>(after), original.has<StaticMesh>(before));
         EXPECT_EQ(imported.has<MobileMesh>(after), original.has<MobileMesh>(before));
+        if (const MobileMesh* mobile = original.tryGet<MobileMesh>(before)) {
+            EXPECT_EQ(imported.get<MobileMesh>(after).active, mobile->active);
+        }
         EXPECT_EQ(imported.has<Avatar>(after), original.has<Avatar>(before));
         EXPECT_EQ(imported.has<PointCacheShaded>(after), original.has<PointCacheShaded>(before));
     }

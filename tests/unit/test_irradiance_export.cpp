@@ -39,6 +39,11 @@ TEST(IrradianceExport, WritesWorldSpaceVerticesWithIrradianceAndMobileFlag) {
                                        glm::half_pi<float>(), glm::vec3(0, 1, 0));
     r.emplace<WorldTransform>(mover, WorldTransform{pose});
 
+    const Entity pooled = r.create(); // out of the world (MobileMesh::active): not exported
+    r.emplace<Mesh>(pooled, triangle());
+    r.emplace<MobileMesh>(pooled, MobileMesh{false});
+    r.emplace<WorldTransform>(pooled);
+
     const Entity avatar = r.create(); // lit by probes: not exported
     r.emplace<Mesh>(avatar, triangle());
     r.emplace<Avatar>(avatar);

@@ -302,6 +302,10 @@ def bad():
     case("bad_base64.gltf", lambda d: d["buffers"][0].update(
         uri=d["buffers"][0]["uri"][:50] + "!!!!" + d["buffers"][0]["uri"][54:]))
     case("unknown_mobility.gltf", lambda d: d["nodes"][0].update(extras={"mobility": "flying"}))
+    case("active_not_bool.gltf",
+         lambda d: d["nodes"][0].update(extras={"mobility": "mobile", "active": "no"}))
+    case("active_on_static.gltf",
+         lambda d: d["nodes"][0].update(extras={"mobility": "static", "active": False}))
     case("sheared_matrix.gltf", lambda d: d["nodes"][0].update(
         matrix=[1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]))
     case("index_out_of_range.gltf", lambda d: set_indices(d, [0, 1, 7]))
