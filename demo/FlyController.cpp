@@ -33,12 +33,35 @@ void FlyController::selectNextMobile(Registry& registry) {
     logInfo("selected mobile ", name ? name->value : std::to_string(mSelectedMobile.index));
 }
 
+void FlyController::toggleSelectedMobile(Registry& registry) {
+    if (!mSelectedMobile || !registry.alive(mSelectedMobile)) return;
+    // The selection and every mobile mesh below it (a glTF node's primitives) go together.
+    const auto below = [&](Entity e) {
+        for (int depth = 0; e && depth < 64; ++depth) {
+            if (e == mSelectedMobile) return true;
+            const Transform* t = registry.tryGet<Transform>(e);
+            e = t ? t->parent : Entity{};
+        }
+        return false;
+    };
+    const MobileMesh* selected = registry.tryGet<MobileMesh>(mSelectedMobile);
+    const bool active = !(selected ? selected->active : true);
+    for (const Entity e : registry.view<const MobileMesh>().entities())
+        if (below(e)) registry.patch<MobileMesh>(e).active = active;
+    const Name* name = registry.tryGet<Name>(mSelectedMobile);
+    logInfo(active ? "put back mobile " : "took out mobile ",
+            name ? name->value : std::to_string(mSelectedMobile.index));
+}
+
 void FlyController::update(Registry& registry, const FrameContext& frame) {
     const float dt = std::min(frame.dt, 0.1f);
 
     const bool tab = pressed(mWindow, GLFW_KEY_TAB);
     if (tab && !mTabDown) selectNextMobile(registry);
     mTabDown = tab;
+    const bool h = pressed(mWindow, GLFW_KEY_H);
+    if (h && !mHDown) toggleSelectedMobile(registry);
+    mHDown = h;
 
     const Entity camera = findActiveCamera(registry);
     if (!camera || !registry.has<Transform>(camera)) return;

@@ -11,10 +11,12 @@ struct GLFWwindow;
 namespace qgi::demo {
 
 /** Interactive input: a fly camera (WASD + right-mouse look, Q/E down/up, Shift faster) and
- *  keyboard moves of the selected mobile (Tab selects, arrows and PageUp/PageDown move).
- *  Taking the camera stops its scripted path; C gives it back.
+ *  keyboard moves of the selected mobile (Tab selects, arrows and PageUp/PageDown move, H
+ *  takes it out of the world and puts it back). Taking the camera stops its scripted path; C
+ *  gives it back.
  *  Reads:  GLFW key and mouse state
- *  Writes: Transform of the active camera and of the selected mobile (patched)           */
+ *  Writes: Transform of the active camera and of the selected mobile, MobileMesh::active of
+ *          the selected mobile and the mobile meshes below it (patched)                  */
 class FlyController {
 public:
     explicit FlyController(GLFWwindow* window) : mWindow(window) {}
@@ -22,13 +24,15 @@ public:
 
 private:
     void selectNextMobile(Registry& registry);
+    /// Takes the selected mobile out of the world (MobileMesh::active), or puts it back.
+    void toggleSelectedMobile(Registry& registry);
 
     GLFWwindow* mWindow;
     Entity mSelectedMobile{};
     bool mLooking = false;
     double mLastX = 0, mLastY = 0;
     float mYaw = 0.f, mPitch = 0.f; ///< radians
-    bool mTabDown = false, mCDown = false;
+    bool mTabDown = false, mCDown = false, mHDown = false;
     bool mCameraTaken = false;
     std::optional<PathFollower> mStashedPath; ///< the camera's script while the player flies
 };

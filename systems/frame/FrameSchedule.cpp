@@ -146,7 +146,8 @@ void FrameSchedule::checkMeshesUnchanged(const Registry& registry) {
     mWarnedMeshChange = true;
     logWarning("FrameSchedule: the scene's meshes changed since it was built (", change,
                "); lighting keeps tracing and lighting the meshes it was built with until a "
-               "new FrameSchedule is built");
+               "new FrameSchedule is built (objects that come and go during play: create them "
+               "up front and switch MobileMesh::active)");
 }
 
 } // namespace qgi

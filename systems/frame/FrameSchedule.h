@@ -42,7 +42,7 @@ struct FrameSettings {
  *    input             (added by the application: player input)
  *    animation         scripted paths move cameras, mobiles, avatars, lights
  *    transform         world matrices; WorldTransform patched only where a pose changed
- *    raytrace.sync     Embree instances of moved mobiles, one top-level commit
+ *    raytrace.sync     Embree instances of moved or switched mobiles, one top-level commit
  *    photon.update     re-traces the photon paths a moved mobile touched; PhotonDelta
  *    detp.irradiance   per-vertex irradiance: static E += E(new) - E(old), moved mobiles in full
  *    (vlf: baked or loaded at construction; static, so no per-frame entry)
@@ -55,7 +55,9 @@ struct FrameSettings {
  *  now: the RayScene (rebuilt in place when there is one, keeping its Embree device), the
  *  ProbeVolume when the scene has a SceneInfo, and a FrameProfiler unless there is one.
  *  Meshes added or destroyed afterwards are not traced or lit until a new FrameSchedule is
- *  built; run() says so in a warning, once. Systems never call each other.               */
+ *  built; run() says so in a warning, once. Mobiles switched with MobileMesh::active are
+ *  followed frame by frame (the pool for objects that come and go). Systems never call each
+ *  other.                                                                                   */
 class FrameSchedule {
 public:
     FrameSchedule(Registry& registry, const FrameSettings& settings);

@@ -14,6 +14,7 @@
 #include "components/VertexIrradiance.h"
 #include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonStore.h"
 
 #include "test_meshes.h"
 
@@ -162,6 +163,51 @@ TEST(FrameSchedule, ANewScheduleTracesMeshesAddedSinceTheLastOne) {
     EXPECT_EQ(std::memcmp(grown.floorLight().data(), fresh.floorLight().data(),
                           fresh.floorLight().size() * sizeof(glm::vec3)),
               0);
+}
+
+TEST(FrameSchedule, APooledMobileTakenOutAndPutBackIsFollowedWithoutANewSchedule) {
+    // The table is a pooled object: MobileMesh::active takes it out of the light and puts it
+    // back frame by frame, with no warning and no new schedule. (Exactness against full
+    // recomputes is the systems' own tests; this is the schedule's wiring.)
+    Room room;
+    room.addTable();
+    FrameSchedule frame(room.registry, lightingOnly());
+    runFrames(frame, room.registry, 1);
+    const std::vector<glm::vec3> shaded = room.floorLight();
+    const auto tableDark = [&] {
+        const auto& light = room.registry.get<VertexIrradiance>(room.table).irradiance;
+        return std::all_of(light.begin(), light.end(),
+                           [](const glm::vec3& e) { return e == glm::vec3(0.f); });
+    };
+    ASSERT_FALSE(tableDark());
+
+    const std::string log = warningsOf(frame, room.registry, 1, [&] {
+        room.registry.patch<MobileMesh>(room.table).active = false;
+    });
+    EXPECT_EQ(log, "");
+    const PhotonDelta& delta = room.registry.ctx().get<PhotonDelta>();
+    EXPECT_FALSE(delta.full);
+    EXPECT_GT(delta.paths.size(), 0u);
+    EXPECT_TRUE(tableDark());
+    // Its shadow went: the floor under it (within 0.2 m of its centre) is brighter everywhere.
+    const Mesh& floor = room.registry.get<Mesh>(room.floor);
+    const std::vector<glm::vec3> open = room.floorLight();
+    std::vector<std::size_t> under;
+    for (std::size_t v = 0; v < floor.positions.size(); ++v)
+        if (glm::length(glm::vec2(floor.positions[v].x, floor.positions[v].z)) < 0.2f) {
+            under.push_back(v);
+            EXPECT_GT(open[v].x, shaded[v].x) << "floor vertex " << v;
+        }
+    EXPECT_GT(under.size(), 2u);
+
+    // Back in: the shadow is back, to the rounding of the incremental sums (a shadow left
+    // out would differ by the whole contrast).
+    room.registry.patch<MobileMesh>(room.table).active = true;
+    runFrames(frame, room.registry, 1);
+    EXPECT_FALSE(tableDark());
+    for (const std::size_t v : under)
+        EXPECT_NEAR(room.floorLight()[v].x, shaded[v].x, 1e-3f * (open[v].x - shaded[v].x))
+            << "floor vertex " << v;
 }
 
 TEST(FrameSchedule, MeshesThatComeOrGoUnderARunningScheduleAreNamedOnce) {
