@@ -10,6 +10,8 @@
 //    the same frame with fullRecompute (every photon re-shot, every vertex re-estimated).
 //    Counters split the frame into its stages (ms per frame). The argument is the path grid's
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
+//  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
+//    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
 #include "components/Material.h"
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
@@ -95,15 +97,19 @@ struct PhotonWorld {
 
     const PhotonStore& store() const { return registry.ctx().get<PhotonStore>(); }
 
-    /// Every mobile 1 cm further along x, turning back after 5 cm; then the frame's update.
-    /// Returns the milliseconds DETP took.
-    double step() {
+    /// Every mobile 1 cm further along x, turning back after 5 cm (or, with `toggle`, taken out
+    /// of the world or put back: MobileMesh::active); then the frame's update. Returns the
+    /// milliseconds DETP took.
+    double step(bool toggle = false) {
         ++frame;
         const int phase = int(frame % 10);
         const float offset = 0.01f * float(phase <= 5 ? phase : 10 - phase);
         for (std::size_t i = 0; i < mobiles.size(); ++i)
-            registry.patch<WorldTransform>(mobiles[i]).matrix =
-                glm::translate(rest[i], glm::vec3(offset, 0.f, 0.f));
+            if (toggle)
+                registry.patch<MobileMesh>(mobiles[i]).active = frame % 2 == 0;
+            else
+                registry.patch<WorldTransform>(mobiles[i]).matrix =
+                    glm::translate(rest[i], glm::vec3(offset, 0.f, 0.f));
         registry.ctx().get<RayScene>().syncMoved(registry);
         const FrameContext context{frame, 0.0, 0.f, 0};
         system->update(registry, context);
@@ -220,6 +226,28 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
         double(w.registry.ctx().get<PhotonPathGrid>().memoryBytes()) / (1 << 20);
 }
 
+void BM_MobileToggle(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    double retraced = 0, candidates = 0, segments = 0, photons = 0, detp = 0;
+    for (auto _ : state) {
+        const auto start = std::chrono::steady_clock::now();
+        detp += w.step(true);
+        photons +=
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count();
+        const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
+        retraced += double(stats.retracedPaths);
+        candidates += double(stats.candidatePaths);
+        segments += double(stats.tracedSegments);
+    }
+    reportFrames(state, w, retraced, candidates, segments);
+    const double frames = double(state.iterations());
+    state.counters["photons_ms"] = (photons - detp) / frames;
+    state.counters["detp_ms"] = detp / frames;
+    // Leave the mobiles in the world for the next benchmark on this world.
+    if (w.frame % 2 == 1) w.step(true);
+}
+
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
@@ -284,6 +312,10 @@ int main(int argc, char** argv) {
             ->Arg(16)
             ->Arg(32)
             ->Arg(48)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        // Every mobile taken out of the world and put back on alternate frames.
+        RegisterBenchmark(id("MobileToggle").c_str(), BM_MobileToggle, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark(id("FullReshoot").c_str(), BM_MobileUpdate, scene, true)
