@@ -170,6 +170,10 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         if (!world || !mobile) return;
         MobileBound& m = it->second;
         if (m.pose == world->matrix && m.active == mobile->active) return; // nothing changed
+        if (!m.active && !mobile->active) { // moved while out of the world: shadows nothing
+            m.pose = world->matrix;
+            return;
+        }
         m.active = mobile->active;
         Move move;
         move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));

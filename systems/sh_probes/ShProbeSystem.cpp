@@ -31,6 +31,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <utility>
 
 namespace qgi {
 namespace {
@@ -110,6 +111,7 @@ void ShProbeSystem::build(Registry& registry) {
             for (const glm::vec3& p : mesh.positions)
                 m.objectBounds.extend(p);
             m.worldBounds = transformBox(m.objectBounds, world.matrix);
+            m.active = registry.get<MobileMesh>(e).active;
             mMobiles.emplace(e, m);
         });
     mBuilt = true;
@@ -448,6 +450,13 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         Mobile& mobile = it->second;
         if (mobile.objectBounds.empty()) continue; // no vertices: nothing to see or hide
         const Aabb now = transformBox(mobile.objectBounds, world->matrix);
+        const MobileMesh* tag = registry.tryGet<MobileMesh>(e);
+        const bool active = !tag || tag->active;
+        const bool wasActive = std::exchange(mobile.active, active);
+        if (!wasActive && !active) { // moved while out of the world: nothing to see
+            mobile.worldBounds = now;
+            continue;
+        }
         // Reach: the influence distance, or as far as the mobile still covers the given
         // share of a probe's sphere of directions.
         const glm::vec3 extent = glm::max(now.extent(), mobile.worldBounds.extent());

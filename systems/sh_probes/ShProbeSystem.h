@@ -83,7 +83,7 @@ public:
         std::size_t avatars = 0;         ///< avatars written
         std::size_t fallbacks = 0;       ///< avatars whose visible corners were all hidden
         std::size_t unlit = 0;           ///< avatars among 8 disabled probes (left as they were)
-        std::size_t outside = 0; ///< avatars over a probe spacing outside the volume
+        std::size_t outside = 0;         ///< avatars over a probe spacing outside the volume
     };
 
     /// Throws qgi::Error for settings out of range (see validate()).
@@ -136,7 +136,8 @@ private:
     };
     struct Mobile {
         Aabb objectBounds;
-        Aabb worldBounds; ///< at the pose the probes last saw
+        Aabb worldBounds;   ///< at the pose the probes last saw
+        bool active = true; ///< MobileMesh::active as the probes last saw it
     };
 
     void snapshot(const Registry& registry);

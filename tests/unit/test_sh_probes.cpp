@@ -731,11 +731,17 @@ TEST(ShProbes, AMobileTakenOutAndPutBackRefreshesItsRegion) {
             EXPECT_TRUE(sameSh(out[p], fresh[p])) << "probe " << p;
         }
 
-    // Back in (from the incremental state, not the fresh one): every probe as it was, bit for
-    // bit (projections are seeded by the probe).
+    // Moved while out (away and back): nothing to see, nothing marked.
     for (std::uint32_t p = 0; p < out.size(); ++p)
         room.world.ctx().get<ProbeVolume>().coefficients(p) = out[p];
-    setActive(true, 2);
+    room.moveCube({1.f, 0.3f, 1.f}, 2);
+    EXPECT_EQ(room.system.lastFrame().markedStale, 0u);
+    room.moveCube({-1.5f, 0.3f, 0.f}, 3);
+    EXPECT_EQ(room.system.lastFrame().markedStale, 0u);
+
+    // Back in (from the incremental state, not the fresh one): every probe as it was, bit for
+    // bit (projections are seeded by the probe).
+    setActive(true, 4);
     const auto back = room.probes();
     for (std::uint32_t p = 0; p < before.size(); ++p)
         EXPECT_TRUE(sameSh(back[p], before[p])) << "probe " << p;
