@@ -1,7 +1,8 @@
 // The smallest program that lights a scene with qgi from a game loop of its own, without qgi's
-// renderer: load a scene, build the frame, move a mobile from game code every frame, and read
-// back the per-vertex irradiance that changed, which is what an engine uploads to its vertex
-// buffers. README.md, "Using qgi in your engine", walks through it.
+// renderer: load a scene, build the frame, move a mobile from game code every frame (and take
+// it out of the world now and then, as a pool does), and read back the per-vertex irradiance
+// that changed, which is what an engine uploads to its vertex buffers. README.md, "Using qgi in
+// your engine", walks through it.
 //
 //   qgi-embed-example [SCENE [FRAMES [PHOTONS]]]
 
@@ -30,7 +31,8 @@ constexpr const char* kUsage =
     "  SCENE    a built-in scene (cornell, atrium) or a .gltf/.glb file; default cornell\n"
     "  FRAMES   frames to run, 1 to 100000; default 30\n"
     "  PHOTONS  photons in the ray set, 1000 to 10000000; default 200000\n"
-    "Moves the scene's first mobile 1 cm a frame along +x and prints, per frame, how many\n"
+    "Moves the scene's first mobile 1 cm a frame along +x, takes it out of the world every\n"
+    "tenth frame (a pooled object despawned for a frame), and prints, per frame, how many\n"
     "vertices' irradiance changed and what the lighting systems cost.\n";
 
 /// A whole number in [low, high] from a command-line argument, or a qgi::Error naming it.
@@ -73,6 +75,10 @@ int run(int argc, char** argv) {
         context.dt = f == 0 ? 0.f : 1.f / 60.f;
         context.time += context.dt;
         if (f > 0) world.patch<qgi::Transform>(mobile).translation.x += 0.01f; // patch: seen
+        // A pooled object: every tenth frame it leaves the world for one frame and comes back.
+        const bool out = f % 10 == 9;
+        if (world.get<qgi::MobileMesh>(mobile).active == out)
+            world.patch<qgi::MobileMesh>(mobile).active = !out;
         const auto start = std::chrono::steady_clock::now();
         frame.run(world, context);
         const double ms =
@@ -98,9 +104,9 @@ int run(int argc, char** argv) {
         });
         const auto& photonFrame = frame.photons()->lastFrame();
         std::printf("frame %3lu: %8.2f ms | photons %s, %6zu paths re-traced | %7zu vertices "
-                    "on %2zu meshes changed\n",
+                    "on %2zu meshes changed%s\n",
                     f, ms, photonFrame.full ? "shot anew" : "updated  ", photonFrame.retracedPaths,
-                    vertices, meshes);
+                    vertices, meshes, out ? " | mobile out of the world" : "");
     }
     return 0;
 }
