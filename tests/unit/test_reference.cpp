@@ -198,26 +198,46 @@ TEST(Reference, DirectionalLightGivesIrradianceTimesCosine) {
 TEST(Reference, SpotLightFollowsTheRenderersConeFalloff) {
     TestScene scene;
     addBlackFloor(scene);
-    const double h = 1.0, inner = glm::radians(20.0), outer = glm::radians(35.0);
+    // The cone angles the light holds (floats).
+    const double h = 1.0, inner = double(float(glm::radians(20.0))),
+                 outer = double(float(glm::radians(35.0)));
     scene.addLight(SpotLight{glm::vec3(1.f), 2.f, float(inner), float(outer)},
                    aimedAlong(glm::vec3(0.f, float(h), 0.f), -kUp));
 
     // A floor point at angle alpha off the axis: d = h / cos alpha, so E = I cos^3 alpha / h^2
     // times the glTF falloff: 1 inside the inner cone, 0 outside the outer one, and between
-    // them ((cos alpha - cos outer) / (cos inner - cos outer))^2.
+    // them t^2, t = (cos alpha - cos outer) / (cos inner - cos outer).
     const std::vector<double> angles{0.0, 10.0, 24.0, 31.0, 34.0, 36.0, 50.0};
     std::vector<glm::vec3> x;
     for (double degrees : angles)
         x.push_back({float(h * std::tan(glm::radians(degrees))), 0.f, 0.f});
     const std::vector<IrradianceEstimate> e = scene.estimate(x, {x.size(), kUp}, samples(64));
+    const double cosInner = std::cos(inner), cosOuter = std::cos(outer);
+    const double width = cosInner - cosOuter;
     for (std::size_t i = 0; i < angles.size(); ++i) {
         const double alpha = std::atan2(double(x[i].x), h); // the angle of the float point
-        const double t = std::clamp(
-            (std::cos(alpha) - std::cos(outer)) / (std::cos(inner) - std::cos(outer)), 0.0, 1.0);
-        const double expected = 2.0 * std::pow(std::cos(alpha), 3.0) / (h * h) * t * t;
+        const double cosAlpha = std::cos(alpha);
+        const double t = std::clamp((cosAlpha - cosOuter) / width, 0.0, 1.0);
+        const double expected = 2.0 * std::pow(cosAlpha, 3.0) / (h * h) * t * t;
+        // The reference's t in float (u = 2^-24), each rounding with its share of the error dt:
+        // - cos inner, cos outer within an ulp (u, both in [0.5, 1)): at most u / width;
+        //   their difference is exact (Sterbenz);
+        // - scale = 1 / width, rounded: u t;
+        // - cos alpha from the float direction to the light, within 3u relative (squared
+        //   distance, root, division): 3u cos alpha / width;
+        // - cos alpha * scale, rounded: u cos alpha / width; offset = -cos outer * scale,
+        //   rounded: u cos outer / width; their sum, rounded: u t (fused: less).
+        // So dt = 2u t + (4 cos alpha + cos outer + 1) u / width: the terms of size 1 / width ~ 8
+        // cancel to t, so their roundings are not relative to t. t^2 is within 2 dt / t +
+        // (dt / t)^2 relative. A clamped t (0 or 1, here far from the cone's edges) is exact.
+        // The rest of the light path is exact to kFloatTolerance.
+        double tolerance = kFloatTolerance;
+        if (t > 0.0 && t < 1.0) {
+            const double dt = 0x1p-24 * (2.0 * t + (4.0 * cosAlpha + cosOuter + 1.0) / width);
+            tolerance += 2.0 * dt / t + (dt / t) * (dt / t);
+        }
         SCOPED_TRACE(angles[i]);
-        // The falloff divides by cos inner - cos outer = 0.12 in float: 8x the rounding.
-        expectExact(e[i], glm::dvec3(expected), 10.0 * kFloatTolerance);
+        expectExact(e[i], glm::dvec3(expected), tolerance);
     }
 }
 

@@ -67,7 +67,19 @@ TEST(VlfDirections, UnitUpperHemisphereEquatorOnce) {
 }
 
 TEST(VlfDirections, CellSolidAnglesSumToTwoPi) {
-    for (int level = 0; level <= 5; ++level) {
+    // Exactly, the pieces of the cells tile the hemisphere: neighbouring triangles share their
+    // float corners and chord midpoints bit for bit, and the equator is a great circle, so the
+    // exact areas of the pieces (two spherical triangles at each corner of each triangle) sum to
+    // 2 pi. Rounding (u = 2^-24): a piece's area in double (normalised corners, triple product,
+    // atan2, its addition into the cell's double sum) is within 2^-48 sr; each cell is rounded
+    // to float once, within u of itself, so within 2 pi u summed over the cells; the double sum
+    // here adds at most size * 2^-53 * 2 pi.
+    // The weight of cell i is fl(area_i / fl(fl(2 pi) / size)): the rounding of pi to float, the
+    // division, the quotient and the cell's own float rounding, each u relative, so the mean
+    // weight is within 4u of 1, plus the double terms above over 2 pi and second-order terms
+    // (below 2^-44).
+    const double twoPi = 2.0 * glm::pi<double>();
+    for (int level = 0; level <= 7; ++level) {
         const DirectionSet set(level);
         double sum = 0.0, weights = 0.0;
         for (std::size_t i = 0; i < set.size(); ++i) {
@@ -75,10 +87,12 @@ TEST(VlfDirections, CellSolidAnglesSumToTwoPi) {
             sum += set.cellSolidAngle(i);
             weights += set.solidAngleWeight(i);
         }
-        // Each cell is rounded to float once: |error| <= size * 2pi * 2^-24 in total.
-        const double bound = double(set.size()) * 2.0 * glm::pi<double>() * 0x1p-24 + 1e-12;
-        EXPECT_NEAR(sum, 2.0 * glm::pi<double>(), bound) << "level " << level;
-        EXPECT_NEAR(weights / double(set.size()), 1.0, bound) << "level " << level;
+        const double pieces = 6.0 * double(set.triangleCount());
+        const double doubleTerms = pieces * 0x1p-48 + double(set.size()) * 0x1p-53 * twoPi;
+        EXPECT_NEAR(sum, twoPi, twoPi * 0x1p-24 + doubleTerms) << "level " << level;
+        EXPECT_NEAR(weights / double(set.size()), 1.0,
+                    4.0 * 0x1p-24 + doubleTerms / twoPi + 0x1p-44)
+            << "level " << level;
     }
 }
 
