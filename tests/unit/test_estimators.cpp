@@ -307,6 +307,13 @@ glm::dvec3 sum(std::span<const glm::dvec3> values) {
     return std::accumulate(values.begin(), values.end(), glm::dvec3(0.0));
 }
 
+DetpSettings impactCountSettings() {
+    DetpSettings settings;
+    settings.estimator = IrradianceEstimator::ImpactCount;
+    settings.discRadius = 0.05f;
+    return settings;
+}
+
 TEST(ImpactCount, EnergyBookkeepingThroughAddAndSubtract) {
     ImpactWorld world;
     std::mt19937 rng(8);
@@ -369,9 +376,7 @@ TEST(ImpactCount, AMobileTakenOutOfTheLightHoldsExactlyZero) {
         store.paths.push_back({std::uint32_t(store.segments.size()), 1, 0});
         pushSegment(store.segments, {}, {0.f, -1.f, 0.f}, 1.f, glm::vec3(power), world.plate, 0, 0);
     }
-    DetpSettings settings;
-    settings.estimator = IrradianceEstimator::ImpactCount;
-    settings.discRadius = 0.05f;
+    const DetpSettings settings = impactCountSettings();
     DetpIrradianceSystem system(settings);
     system.build(registry);
     system.update(registry, {});
@@ -432,9 +437,7 @@ TEST(ImpactCount, SystemIncrementalEqualsFull) {
         store.paths.push_back({s, 1, 0});
         store.segments.appendFrom(initial, s);
     }
-    DetpSettings settings;
-    settings.estimator = IrradianceEstimator::ImpactCount;
-    settings.discRadius = 0.05f;
+    const DetpSettings settings = impactCountSettings();
     DetpIrradianceSystem system(settings);
     system.build(registry);
     system.update(registry, {});

@@ -390,6 +390,46 @@ TEST(PhotonUpdate, MobilesTakenOutAndPutBackRetraceExactlyTheirPathsAndMatchAFul
     EXPECT_TRUE(sameStore(storeOf(registry), first));
 }
 
+/// What bounds the rounding of incremental irradiance sums: how many segment powers they
+/// added (or subtracted) and the largest power a channel of any of them carries.
+struct SumRounding {
+    double additions = 0.0, power = 0.0;
+    /// Notes `segments`, and `extra` more additions besides (relabelled landings: two each).
+    void add(const PhotonSegments& segments, double extra = 0.0) {
+        additions += double(segments.size()) + extra;
+        for (std::size_t s = 0; s < segments.size(); ++s)
+            for (int c = 0; c < 3; ++c)
+                power = std::max(power, double(segments.power[s][c]));
+    }
+    /// Two double sums of these additions differ by at most this much, W (each is within
+    /// n^2 p 2^-53 of the exact sum).
+    double sums() const { return 2.0 * additions * additions * power * 0x1p-53; }
+};
+
+/// Over the meshes: the most triangles around one vertex, and the smallest triangle's area.
+struct Rings {
+    double largest = 0.0, smallestTriangle = std::numeric_limits<double>::infinity();
+};
+
+Rings meshRings(const Registry& registry, const std::vector<Entity>& meshes) {
+    Rings rings;
+    for (const Entity e : meshes) {
+        const Mesh& mesh = registry.get<Mesh>(e);
+        std::vector<int> triangles(mesh.positions.size(), 0);
+        for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
+            const glm::dvec3 a(mesh.positions[mesh.indices[t]]);
+            const glm::dvec3 b(mesh.positions[mesh.indices[t + 1]]);
+            const glm::dvec3 c(mesh.positions[mesh.indices[t + 2]]);
+            rings.smallestTriangle =
+                std::min(rings.smallestTriangle, 0.5 * glm::length(glm::cross(b - a, c - a)));
+            for (int k = 0; k < 3; ++k)
+                rings.largest =
+                    std::max(rings.largest, double(++triangles[mesh.indices[t + std::size_t(k)]]));
+        }
+    }
+    return rings;
+}
+
 /// Irradiance estimators following mobiles taken out and put back, frame by frame.
 class MobilesTakenOut : public ::testing::TestWithParam<IrradianceEstimator> {};
 
@@ -413,35 +453,21 @@ TEST_P(MobilesTakenOut, IrradianceEqualsAFullEstimateEveryFrameAndAnInactiveMobi
     registry.clearChanges();
     const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
 
-    // Rounding bounds (DETP: a vertex's double sum of n additions of at most p W a channel is
-    // within n^2 p 2^-53 of the exact sum, so two such sums within twice that, over pi r^2;
-    // impact count: the same per triangle, at most 6 triangles over a ring of at least the
-    // smallest triangle's area; the photon map re-estimates from scratch: exact), then one
-    // rounding to float each way (2^-23 relative).
-    double additions = double(storeOf(registry).segments.size()), power = 0.0;
-    const auto notePower = [&](const PhotonSegments& segments) {
-        for (std::size_t s = 0; s < segments.size(); ++s)
-            for (int c = 0; c < 3; ++c)
-                power = std::max(power, double(segments.power[s][c]));
-    };
-    notePower(storeOf(registry).segments);
-    double smallestTriangle = 1e30;
-    for (const Entity e : meshes) {
-        const Mesh& mesh = registry.get<Mesh>(e);
-        for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
-            const glm::vec3 a = mesh.positions[mesh.indices[t]];
-            smallestTriangle = std::min(
-                smallestTriangle,
-                0.5 * double(glm::length(glm::cross(mesh.positions[mesh.indices[t + 1]] - a,
-                                                    mesh.positions[mesh.indices[t + 2]] - a))));
-        }
-    }
+    // Rounding bounds (DETP: the two double sums of a vertex over pi r^2; impact count: the same
+    // per triangle, over a ring of at least the smallest triangle's area, whose float area is
+    // within 2^-16 of the one here, as in ASlidingMobileKeepsThePathsThatLandWhereTheyDid; the
+    // photon map re-estimates from scratch: exact), then one rounding to float each way
+    // (2^-23 relative).
+    SumRounding rounding;
+    rounding.add(storeOf(registry).segments);
+    const Rings rings = meshRings(registry, meshes);
     const auto expectFullEstimate = [&](int frame) {
-        const double sums = 2.0 * additions * additions * power * 0x1p-53;
         const double absolute =
-            GetParam() == IrradianceEstimator::Detp ? sums / (glm::pi<double>() * 0.05 * 0.05)
-            : GetParam() == IrradianceEstimator::ImpactCount ? 6.0 * sums / smallestTriangle
-                                                             : 0.0;
+            GetParam() == IrradianceEstimator::Detp
+                ? rounding.sums() / (glm::pi<double>() * 0.05 * 0.05)
+            : GetParam() == IrradianceEstimator::ImpactCount
+                ? rings.largest * rounding.sums() / (rings.smallestTriangle * (1.0 - 0x1p-16))
+                : 0.0;
         std::vector<std::vector<glm::vec3>> incremental;
         for (const Entity e : meshes)
             incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
@@ -495,9 +521,8 @@ TEST_P(MobilesTakenOut, IrradianceEqualsAFullEstimateEveryFrameAndAnInactiveMobi
         photons.update(registry, FrameContext{f + 1, 0.0, 0.f, 0});
         const PhotonDelta& delta = deltaOf(registry);
         ASSERT_FALSE(delta.full);
-        additions +=
-            double(delta.oldSegments.size() + delta.newSegments.size() + 2 * delta.relabels.size());
-        notePower(delta.newSegments);
+        rounding.add(delta.oldSegments);
+        rounding.add(delta.newSegments, 2.0 * double(delta.relabels.size()));
         // Delta segments that cross the discs of a mobile that is out and stays put: the
         // irradiance system must not count them (checked by the darkness below).
         for (const Entity mobile : {room.cube, room.crate}) {
@@ -606,15 +631,9 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
     impacts.build(registry);
     impacts.update(registry, FrameContext{});
     std::size_t relabels = 0;
-    // For the rounding bound at the end: the impact sums' additions so far, and the largest
-    // power a channel of any added segment carries.
-    double additions = double(storeOf(registry).segments.size()), power = 0.0;
-    const auto notePower = [&](const PhotonSegments& segments) {
-        for (std::size_t s = 0; s < segments.size(); ++s)
-            for (int c = 0; c < 3; ++c)
-                power = std::max(power, double(segments.power[s][c]));
-    };
-    notePower(storeOf(registry).segments);
+    // For the rounding bound at the end.
+    SumRounding impactSums;
+    impactSums.add(storeOf(registry).segments);
 
     std::size_t landed = 0, retraced = 0;
     glm::mat4 pose(1.f);
@@ -634,9 +653,8 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
         impacts.update(registry, FrameContext{frame});
         const PhotonDelta& delta = deltaOf(registry);
         relabels += delta.relabels.size();
-        additions +=
-            double(delta.oldSegments.size() + delta.newSegments.size() + 2 * delta.relabels.size());
-        notePower(delta.newSegments);
+        impactSums.add(delta.oldSegments);
+        impactSums.add(delta.newSegments, 2.0 * double(delta.relabels.size()));
         landed += system.lastFrame().landedPaths;
         retraced += system.lastFrame().retracedPaths;
     }
@@ -656,23 +674,11 @@ TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
         // double roundings and second-order terms add less than 2^-40 relative.
         std::vector<std::vector<glm::vec3>> incremental;
         const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
-        double ring = 0.0, smallestTriangle = std::numeric_limits<double>::infinity();
-        for (const Entity e : meshes) {
+        for (const Entity e : meshes)
             incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
-            const Mesh& mesh = registry.get<Mesh>(e);
-            std::vector<int> triangles(mesh.positions.size(), 0);
-            for (std::size_t t = 0; t < mesh.indices.size(); t += 3) {
-                const glm::dvec3 a(mesh.positions[mesh.indices[t]]);
-                const glm::dvec3 b(mesh.positions[mesh.indices[t + 1]]);
-                const glm::dvec3 c(mesh.positions[mesh.indices[t + 2]]);
-                smallestTriangle =
-                    std::min(smallestTriangle, 0.5 * glm::length(glm::cross(b - a, c - a)));
-                for (int k = 0; k < 3; ++k)
-                    ring = std::max(ring, double(++triangles[mesh.indices[t + std::size_t(k)]]));
-            }
-        }
-        const double absolute = ring * 2.0 * additions * additions * power * 0x1p-53 /
-                                (smallestTriangle * (1.0 - 0x1p-16));
+        const Rings rings = meshRings(registry, meshes);
+        const double absolute =
+            rings.largest * impactSums.sums() / (rings.smallestTriangle * (1.0 - 0x1p-16));
         DetpIrradianceSystem reference(impactSettings);
         reference.build(registry);
         reference.update(registry, FrameContext{});

@@ -457,6 +457,17 @@ TEST(PointCacheFile, CorruptTruncatedAndStaleFilesAreRejectedAndRebuilt) {
 
 // ---- per-frame update ---------------------------------------------------------------------------
 
+/// A small point set over the shadow scene, re-shading 40 points a frame.
+PointCacheSettings budgetedSettings() {
+    PointCacheSettings settings;
+    settings.rMin = 0.06f;
+    settings.rMax = 0.25f;
+    settings.particleCount = 512;
+    settings.stopAfterRejections = 2000;
+    settings.updateBudget = 40;
+    return settings;
+}
+
 TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshValues) {
     ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
     // The mobile blocker starts low and to the side: its shadow falls on part of the floor.
@@ -465,12 +476,7 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     RayScene& rays = scene.registry.ctx().get<RayScene>();
     rays.syncMoved(scene.registry);
     scene.registry.clearChanges();
-    PointCacheSettings settings;
-    settings.rMin = 0.06f;
-    settings.rMax = 0.25f;
-    settings.particleCount = 512;
-    settings.stopAfterRejections = 2000;
-    settings.updateBudget = 40;
+    const PointCacheSettings settings = budgetedSettings();
     PointCacheSystem system(settings);
     system.build(scene.registry);
     PointCache& cache = scene.registry.ctx().get<PointCache>();
@@ -571,12 +577,7 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
 
 TEST(PointCacheUpdate, ABlockerTakenOutAndPutBackDrainsToFreshShadows) {
     ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
-    PointCacheSettings settings;
-    settings.rMin = 0.06f;
-    settings.rMax = 0.25f;
-    settings.particleCount = 512;
-    settings.stopAfterRejections = 2000;
-    settings.updateBudget = 40;
+    const PointCacheSettings settings = budgetedSettings();
     PointCacheSystem system(settings);
     system.build(scene.registry);
     const PointCache& cache = scene.registry.ctx().get<PointCache>();
