@@ -1,9 +1,9 @@
 #include "systems/photon_update/PhotonEmitter.h"
 
 #include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
-#include "components/LightStandIn.h"
 #include "components/MobileMesh.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
@@ -155,8 +155,10 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
         registry.view<const Material, const Mesh, const WorldTransform>().each(
             [&](Entity e, const Material& material, const Mesh&, const WorldTransform& world) {
                 const glm::vec3& l = material.emission;
-                // Only meshes the ray scene holds take part in photon transport.
-                const bool traced = registry.has<StaticMesh>(e) || registry.has<MobileMesh>(e);
+                // Only meshes the ray scene holds take part in photon transport; a mobile out of
+                // the world (MobileMesh::active) shines no light.
+                const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
+                const bool traced = registry.has<StaticMesh>(e) || (mobile && mobile->active);
                 if (traced && (l.x != 0.f || l.y != 0.f || l.z != 0.f))
                     add(EmitterKind::Surface, e, world.matrix).radiant = l;
             });

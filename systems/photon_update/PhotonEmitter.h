@@ -79,8 +79,9 @@ struct PhotonEmitter {
 };
 
 /// Appends the sources of every light the settings enable, in a fixed order (point, spot,
-/// directional, then emissive meshes, each in registry order); fields other than the source
-/// ones keep their defaults. Reads only components: cheap enough for every frame.
+/// directional, then emissive meshes, each in registry order; an emissive mobile out of the
+/// world, MobileMesh::active false, is none); fields other than the source ones keep their
+/// defaults. Reads only components: cheap enough for every frame.
 void findEmitterSources(const Registry& registry, const PhotonSettings& settings,
                         std::vector<PhotonEmitter>& out);
 

@@ -564,6 +564,35 @@ INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
                              return std::string(irradianceEstimatorName(test.param));
                          });
 
+TEST(PhotonUpdate, AnEmissiveMobileTakenOutStopsShiningAndPutBackShinesAgain) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    registry.get<Material>(room.crate).emission = glm::vec3(20.f); // a glowing crate
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(20'000));
+    firstUpdate(registry, system);
+    const auto shines = [&] {
+        const auto& lights = storeOf(registry).lights;
+        return std::any_of(lights.begin(), lights.end(), [&](const PhotonLight& l) {
+            return l.entity == room.crate && l.photonCount > 0;
+        });
+    };
+    ASSERT_TRUE(shines());
+    const PhotonStore first = storeOf(registry);
+
+    // A light going out or coming back shares the photons anew: a full shot each time, the
+    // second one the first shot again.
+    for (const bool active : {false, true}) {
+        registry.patch<MobileMesh>(room.crate).active = active;
+        registry.ctx().get<RayScene>().syncMoved(registry);
+        system.update(registry, FrameContext{active ? 2u : 1u, 0.0, 0.f, 0});
+        registry.clearChanges();
+        EXPECT_TRUE(deltaOf(registry).full);
+        EXPECT_EQ(shines(), active);
+    }
+    EXPECT_TRUE(sameStore(storeOf(registry), first));
+}
+
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
     Registry incremental, baseline;
     const test::Room a = buildRoom(incremental, kCubeRest, kCrateRest);
