@@ -21,6 +21,7 @@
 #include "runtime/scene/SceneQueries.h"
 #include "systems/render/RenderSystem.h"
 
+#include <epoxy/gl.h>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -31,7 +32,6 @@
 #include <cstdint>
 #include <cstdlib>
 #include <filesystem>
-#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -132,14 +132,6 @@ glm::vec3 luminaireEmission(const Registry& registry) {
 /// 1/d^2 and cos by ~1e-5 relative, so 1e-3 leaves a factor 100 of headroom.
 constexpr double kPixelTolerance = 1e-3;
 
-struct Comparison {
-    std::vector<double> error; ///< per pixel: largest channel error, relative (see compare)
-    std::vector<bool> edges;   ///< per pixel: near a discontinuity of the reference
-    double smoothWithin = 0;   ///< of the pixels away from discontinuities, fraction within
-    double within = 0;         ///< of all pixels, fraction within tolerance
-    double discontinuity = 0;  ///< fraction of pixels near a discontinuity
-};
-
 /// Median over lit pixels of the mean channel radiance: the scale "dark" is measured against.
 double medianLitRadiance(const ImageF& image) {
     std::vector<double> lit;
@@ -151,37 +143,6 @@ double medianLitRadiance(const ImageF& image) {
     const auto middle = lit.begin() + std::ptrdiff_t(lit.size() / 2);
     std::nth_element(lit.begin(), middle, lit.end());
     return *middle;
-}
-
-/// Each channel's error is relative to the reference value, or to 1e-3 of the median lit
-/// radiance where the reference is darker than that, so a shadowed pixel must stay dark (the
-/// luminaire, hundreds of times brighter than the walls, would make a mean useless here).
-/// A value that is not finite is the largest error.
-Comparison compare(const ImageF& actual, const RefImage& reference) {
-    const ImageF& expected = reference.radiance;
-    const double floor = 1e-3 * medianLitRadiance(expected);
-    Comparison c;
-    c.edges = test::discontinuities(reference);
-    c.error.resize(c.edges.size());
-    std::size_t smooth = 0, smoothWithin = 0, within = 0;
-    for (std::size_t p = 0; p < c.edges.size(); ++p) {
-        double& error = c.error[p];
-        for (std::size_t ch = 0; ch < 3; ++ch) {
-            const double r = expected.rgba[4 * p + ch], a = actual.rgba[4 * p + ch];
-            error = std::max(error, std::isfinite(a) ? std::abs(a - r) / std::max(r, floor)
-                                                     : std::numeric_limits<double>::infinity());
-        }
-        within += error <= kPixelTolerance;
-        if (!c.edges[p]) {
-            ++smooth;
-            smoothWithin += error <= kPixelTolerance;
-        }
-    }
-    const auto pixels = double(c.edges.size());
-    c.smoothWithin = double(smoothWithin) / double(std::max<std::size_t>(smooth, 1));
-    c.within = double(within) / pixels;
-    c.discontinuity = (pixels - double(smooth)) / pixels;
-    return c;
 }
 
 // ---- the test --------------------------------------------------------------------------------
@@ -212,62 +173,68 @@ TEST_F(BuiltinCornellTest, DirectLightMatchesCpuReference) {
     RenderSystem renderer(settings);
     renderer.update(mWorld, FrameContext{}); // frame 0, time 0: the poses the scene was built in
     const ImageF actual = renderer.readHdr();
-    const RefImage reference = referenceScene(mWorld).trace();
-    const Comparison c = compare(actual, reference);
-    bool ok = true;
+    const ReferenceScene scene = referenceScene(mWorld);
+    const RefImage reference = scene.trace();
 
-    // Away from discontinuities (a 3x3 neighbourhood that sees one surface with one set of
-    // unoccluded lights) nothing may differ. Shadow-map filtering (a 3x3-texel PCF tent, a
-    // 1.5-texel normal offset) blurs shadow edges over ~3 texels of 2d / 1024, at most 3.9 mm
-    // for the d <= 0.66 m between the light and any visible point; a pixel covers >= 6 mm of
-    // the nearest visible surface (0.8 m away), so the blur cannot reach the centre of a pixel
-    // whose neighbours all agree. The avatar's smooth normals are interpolated by both, so its
-    // pixels count like the rest; where its shading normal faces the light but its face does
-    // not, the reference counts the light as hidden (as the shadow map sees it), and the
-    // terminator between is a discontinuity. 0.1% allows for numeric ties.
-    ok &= c.smoothWithin >= 0.999;
-    EXPECT_GE(c.smoothWithin, 0.999);
+    // A pixel may differ from the reference only as far as the reference itself moves when its
+    // inputs move by what rasterization and shadow mapping may legitimately change
+    // (test::referenceRange): the camera ray by the rasterizer's vertex snapping (offsets of
+    // 2^-GL_SUBPIXEL_BITS pixels), the light's visibility by the shadow lookup's reach (a cube
+    // face of shadowMapSize texels spans 90 degrees: 2 / shadowMapSize metres per metre of
+    // distance; the lookup sits 1.5 texels off the surface and PCF reads texels within
+    // 1.5 sqrt(2) texels of it). Every pixel must lie within kPixelTolerance of that range,
+    // relative to its ends, or to 1e-3 of the median lit radiance where they are darker (the
+    // luminaire, hundreds of times brighter than the walls, would make a mean useless here),
+    // so a shadowed pixel must stay dark. Where the range is no wider than the tolerance (all
+    // but silhouettes between differently lit surfaces and the bands along shadow edges) this
+    // is the plain comparison with the reference. The avatar's smooth normals are interpolated
+    // by both; where its shading normal faces the light but its face does not, the reference
+    // hides the light and the renderer leaves it to the shadow map, so the range holds both.
+    GLint subpixelBits = 0;
+    glGetIntegerv(GL_SUBPIXEL_BITS, &subpixelBits);
+    test::RefPerturbation perturbation;
+    perturbation.rayOffset = std::ldexp(1.0, -subpixelBits);
+    perturbation.shadowTexel.assign(scene.lights.size(), 2.0 / double(settings.shadowMapSize));
+    const test::RefRange range =
+        test::referenceRange(scene.triangles, scene.lights, scene.camera, perturbation);
+    const test::RangeComparison c =
+        test::compareWithRange(actual, reference.radiance, range, kPixelTolerance,
+                               1e-3 * medianLitRadiance(reference.radiance));
+    RecordProperty("excusedPixels", int(c.excused));
+    RecordProperty("worstNarrowError", std::to_string(c.worstNarrow));
+    EXPECT_EQ(c.failed, 0u) << c.failed << " pixels outside their range (" << c.excused << " of "
+                            << c.failures.size() << " have a range wider than the tolerance)";
 
-    // Discontinuities (18% of this image: the blocks cast long shadows from a light at the
-    // ceiling) may differ only where a pixel centre falls into that <= 3.9 mm band along a
-    // shadow edge or a contact line: silhouettes are sampled at the same pixel centres by
-    // both. The reference has ~220 pixel lengths of shadow edge and < 70 of shadowed floor
-    // against a block or the avatar; at most ~2/3 of a pixel wide, the band can flip at most
-    // ~190 pixels (1.6%): 98% of all pixels must match.
-    ok &= c.within >= 0.98;
-    EXPECT_GE(c.within, 0.98) << "discontinuities: " << c.discontinuity;
-
-    // The luminaire, a strip of about 16 x 3 pixels, lies mostly in the discontinuity set. Its
-    // pixels are those brighter than half its emission: nothing else in view reflects a tenth
-    // of that. Rasterization and ray casting agree on which pixel centres it covers, so all
-    // but a rim pixel or so must match.
+    // The luminaire, a strip of about 16 x 3 pixels, must be in view; its pixels (those
+    // brighter than half its emission: nothing else in view reflects a tenth of that) are
+    // checked above like every other pixel.
     const glm::vec3 bright = 0.5f * luminaireEmission(mWorld);
-    std::size_t luminaire = 0, luminaireWithin = 0;
-    for (std::size_t p = 0; p < c.error.size(); ++p)
+    std::size_t luminaire = 0;
+    for (std::size_t p = 0; p < c.failures.size(); ++p)
         if (const float* r = &reference.radiance.rgba[4 * p];
-            r[0] > bright.x && r[1] > bright.y && r[2] > bright.z) {
+            r[0] > bright.x && r[1] > bright.y && r[2] > bright.z)
             ++luminaire;
-            luminaireWithin += c.error[p] <= kPixelTolerance;
-        }
     EXPECT_GE(luminaire, 32u) << "the luminaire should cover about 16 x 3 pixels";
-    const double luminaireFraction =
-        double(luminaireWithin) / double(std::max<std::size_t>(luminaire, 1));
-    ok &= luminaireFraction >= 0.9;
-    EXPECT_GE(luminaireFraction, 0.9) << "of " << luminaire << " luminaire pixels";
 
-    if (!ok)
+    if (c.failed > 0)
         test::writeFailureImages(fs::path(QGI_TEST_OUTPUT_DIR), "builtin_cornell", actual,
                                  reference.radiance);
 }
 
-// The committed reference EXR must be exactly what the CPU reference computes today from the
-// built-in scene, so the golden file is backed by the independent math, not by the renderer.
-// Regenerate with QGI_WRITE_REFERENCE=1 (and look at the image before committing it).
+// A regression tripwire for the CPU reference, not a test of the renderer (the test above
+// compares with a fresh reference): the committed EXR holds what traceReference computed from
+// the built-in scene when it was written, and a fresh trace must agree with it to within what
+// float rounding of the scene's inputs on another platform can change (test::roundingRange);
+// on the platform that wrote it, exactly. Regenerate with QGI_WRITE_REFERENCE=1 (and look at
+// the image before committing it).
 TEST(BuiltinCornellReference, GoldenExrEqualsCpuReference) {
     Registry world;
     ASSERT_NO_FATAL_FAILURE(buildCornell(world));
-    const ImageF fresh = referenceScene(world).trace().radiance;
-    if (test::checkGolden(kGolden, fresh) == test::GoldenCheck::Written)
+    const ReferenceScene scene = referenceScene(world);
+    const ImageF fresh = scene.trace().radiance;
+    if (test::checkGolden(kGolden, fresh,
+                          test::roundingRange(scene.triangles, scene.lights, scene.camera)) ==
+        test::GoldenCheck::Written)
         GTEST_SKIP() << "wrote " << kGolden;
 }
 
