@@ -1,6 +1,7 @@
 #include "demo/FlyController.h"
 
 #include "components/Camera.h"
+#include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/PathFollower.h"
@@ -14,40 +15,54 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 namespace qgi::demo {
 
 namespace {
 
-bool pressed(GLFWwindow* w, int key) { return glfwGetKey(w, key) == GLFW_PRESS; }
+bool pressed(GLFWwindow* w, int key) {
+    return glfwGetKey(w, key) == GLFW_PRESS;
+}
+
+/// What moves and switches as one: a mobile mesh, or the glTF node whose primitives several
+/// mobile meshes are (the importer makes each primitive a child named "<node>#<k>" of a node
+/// that has no Mesh of its own).
+Entity mobileUnit(const Registry& registry, Entity mesh) {
+    const Transform* t = registry.tryGet<Transform>(mesh);
+    const Entity parent = t ? t->parent : Entity{};
+    if (!parent || !registry.alive(parent) || registry.has<Mesh>(parent)) return mesh;
+    const Name* name = registry.tryGet<Name>(mesh);
+    const Name* parentName = registry.tryGet<Name>(parent);
+    const bool primitive = name && parentName && name->value.starts_with(parentName->value + "#");
+    return primitive ? parent : mesh;
+}
 
 } // namespace
 
 void FlyController::selectNextMobile(Registry& registry) {
-    const auto mobiles = registry.view<const MobileMesh, const Transform>().entities();
-    if (mobiles.empty()) return;
-    // Mobile meshes may be children of one mobile node: move the root of the selection.
-    auto it = std::find(mobiles.begin(), mobiles.end(), mSelectedMobile);
-    mSelectedMobile = (it == mobiles.end() || ++it == mobiles.end()) ? mobiles.front() : *it;
+    std::vector<Entity> units;
+    for (const Entity e : registry.view<const MobileMesh, const Transform>().entities()) {
+        const Entity unit = mobileUnit(registry, e);
+        if (std::find(units.begin(), units.end(), unit) == units.end()) units.push_back(unit);
+    }
+    if (units.empty()) return;
+    auto it = std::find(units.begin(), units.end(), mSelectedMobile);
+    mSelectedMobile = (it == units.end() || ++it == units.end()) ? units.front() : *it;
     const Name* name = registry.tryGet<Name>(mSelectedMobile);
     logInfo("selected mobile ", name ? name->value : std::to_string(mSelectedMobile.index));
 }
 
 void FlyController::toggleSelectedMobile(Registry& registry) {
     if (!mSelectedMobile || !registry.alive(mSelectedMobile)) return;
-    // The selection and every mobile mesh below it (a glTF node's primitives) go together.
-    const auto below = [&](Entity e) {
-        for (int depth = 0; e && depth < 64; ++depth) {
-            if (e == mSelectedMobile) return true;
-            const Transform* t = registry.tryGet<Transform>(e);
-            e = t ? t->parent : Entity{};
-        }
-        return false;
-    };
-    const MobileMesh* selected = registry.tryGet<MobileMesh>(mSelectedMobile);
-    const bool active = !(selected ? selected->active : true);
+    // Every mobile mesh of the selected unit goes together.
+    std::vector<Entity> meshes;
     for (const Entity e : registry.view<const MobileMesh>().entities())
-        if (below(e)) registry.patch<MobileMesh>(e).active = active;
+        if (mobileUnit(registry, e) == mSelectedMobile) meshes.push_back(e);
+    if (meshes.empty()) return;
+    const bool active = !registry.get<MobileMesh>(meshes.front()).active;
+    for (const Entity e : meshes)
+        registry.patch<MobileMesh>(e).active = active;
     const Name* name = registry.tryGet<Name>(mSelectedMobile);
     logInfo(active ? "put back mobile " : "took out mobile ",
             name ? name->value : std::to_string(mSelectedMobile.index));
@@ -102,7 +117,8 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
 
     if (mCameraTaken) {
         Transform& t = registry.patch<Transform>(camera);
-        t.rotation = glm::angleAxis(mYaw, glm::vec3(0, 1, 0)) * glm::angleAxis(mPitch, glm::vec3(1, 0, 0));
+        t.rotation =
+            glm::angleAxis(mYaw, glm::vec3(0, 1, 0)) * glm::angleAxis(mPitch, glm::vec3(1, 0, 0));
         const float speed = (pressed(mWindow, GLFW_KEY_LEFT_SHIFT) ? 8.f : 2.f) * dt;
         const glm::vec3 forward = t.rotation * glm::vec3(0, 0, -1);
         const glm::vec3 right = t.rotation * glm::vec3(1, 0, 0);

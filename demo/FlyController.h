@@ -15,8 +15,10 @@ namespace qgi::demo {
  *  takes it out of the world and puts it back). Taking the camera stops its scripted path; C
  *  gives it back.
  *  Reads:  GLFW key and mouse state
+ *  A glTF node whose primitives are several mobile meshes is selected, moved and switched as
+ *  one.
  *  Writes: Transform of the active camera and of the selected mobile, MobileMesh::active of
- *          the selected mobile and the mobile meshes below it (patched)                  */
+ *          the selected mobile's meshes (patched)                                        */
 class FlyController {
 public:
     explicit FlyController(GLFWwindow* window) : mWindow(window) {}

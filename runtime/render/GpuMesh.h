@@ -33,7 +33,8 @@ struct GpuMesh {
     GlBuffer indices;
     std::uint32_t vertexCount = 0;
     std::uint32_t indexCount = 0;
-    Aabb bounds; ///< object space
+    Aabb bounds;       ///< object space
+    bool drawn = true; ///< whether it was drawn last frame (a MobileMesh can be out of the world)
 };
 
 /// Uploads a mesh (the caller has checked that every attribute has one entry per position).

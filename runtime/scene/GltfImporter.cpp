@@ -640,7 +640,7 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         r.mesh = it->second;
         if (r.source->material >= 0) r.material = materials[std::size_t(r.source->material)];
         const Aabb box = worldAabb(*r.mesh, r.world);
-        scene.info.bounds.extend(box);
+        if (r.active) scene.info.bounds.extend(box); // a pooled mobile out may wait anywhere
         if (r.mobility == Mobility::Avatar) r.avatarRadius = 0.5f * glm::length(box.extent());
     }
     checkPrecision(scene.info.bounds);

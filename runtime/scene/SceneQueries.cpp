@@ -57,11 +57,14 @@ SceneInfo describeMeshes(const Registry& registry) {
     info.source = "code";
     registry.view<const Mesh, const WorldTransform>().each(
         [&](Entity e, const Mesh& mesh, const WorldTransform& world) {
-            if (!registry.has<StaticMesh>(e) && !registry.has<MobileMesh>(e)) return;
+            const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
+            if (!registry.has<StaticMesh>(e) && !mobile) return;
+            // A pooled mobile out of the world may wait anywhere: not part of the scene's box.
+            const bool placed = !mobile || mobile->active;
             std::vector<glm::vec3> points(mesh.positions.size());
             for (std::size_t i = 0; i < points.size(); ++i) {
                 points[i] = glm::vec3(world.matrix * glm::vec4(mesh.positions[i], 1.f));
-                info.bounds.extend(points[i]);
+                if (placed) info.bounds.extend(points[i]);
             }
             for (std::size_t t = 0; t + 2 < mesh.indices.size(); t += 3)
                 for (int k = 0; k < 3; ++k) {

@@ -22,7 +22,8 @@ bool hasLightStandIn(const Registry& registry, Entity surface);
 std::string entityName(const Registry& registry, Entity e);
 
 /// A SceneInfo for meshes built in code (the loaders write their own): the world bounds of
-/// every StaticMesh and MobileMesh, and their longest triangle edge as the edge bound (refine
+/// every StaticMesh and MobileMesh (but mobiles out of the world: a pool may wait anywhere),
+/// and their longest triangle edge as the edge bound (refine
 /// meshes with processMesh first: per-vertex lighting needs vertices where light changes).
 /// Named "scene", source "code", no environment light.
 SceneInfo describeMeshes(const Registry& registry);

@@ -156,7 +156,8 @@ void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const P
     for (const std::uint32_t r : mMoved)
         mIsMoved[r] = 0;
     mMoved.clear();
-    const auto consider = [&](Entity e) {
+    // `posed`: the entity's pose may have changed; otherwise only its switch counts.
+    const auto consider = [&](Entity e, bool posed) {
         const std::int64_t found = mReceivers.find(e);
         if (found < 0) return;
         const auto r = std::size_t(found);
@@ -164,17 +165,20 @@ void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const P
         const bool active = mobileActive(registry, e);
         const bool switched = active != bool(mActive[r]);
         mActive[r] = active;
+        if (!switched && !posed) return;
         // A pose the ray scene would refuse too: keep the mobile's light where it was.
-        if (!mReceivers.refreshPose(registry, std::uint32_t(r)) && !switched) return;
+        const bool placed = posed && mReceivers.refreshPose(registry, std::uint32_t(r));
+        // Out of the world before and after: its zeros stand, wherever it went.
+        if (!switched && (!placed || !active)) return;
         mIsMoved[r] = 1;
         mMoved.push_back(std::uint32_t(r));
     };
     for (const Entity e : registry.changed<WorldTransform>())
-        consider(e);
-    for (const Entity e : registry.changed<MobileMesh>())
-        consider(e);
+        consider(e, true);
     for (const Entity e : delta.movedMobiles)
-        consider(e);
+        consider(e, true);
+    for (const Entity e : registry.changed<MobileMesh>())
+        consider(e, false);
     std::sort(mMoved.begin(), mMoved.end());
     if (mSettings.estimator != IrradianceEstimator::Detp) return;
     for (const std::uint32_t r : mMoved) {

@@ -107,7 +107,27 @@ void FrameSchedule::run(Registry& registry, const FrameContext& frame) {
                "FrameSchedule::run was given a Registry other than the one it was built for "
                "(build a FrameSchedule for each registry)");
     checkMeshesUnchanged(registry);
+    followUnpatchedSwitches(registry);
     mSchedule.run(registry, frame);
+}
+
+void FrameSchedule::followUnpatchedSwitches(Registry& registry) {
+    const RayScene* scene = registry.ctx().find<RayScene>();
+    if (!scene) return;
+    for (std::size_t i = mStaticCount; i < mMeshes.size(); ++i) {
+        const Entity e = mMeshes[i];
+        const MobileMesh* mobile = registry.alive(e) ? registry.tryGet<MobileMesh>(e) : nullptr;
+        if (!mobile || !scene->isMobile(e) || mobile->active == scene->mobileActive(e) ||
+            registry.wasChanged<MobileMesh>(e))
+            continue;
+        registry.patch<MobileMesh>(e);
+        if (mWarnedUnpatched) continue;
+        mWarnedUnpatched = true;
+        logWarning("FrameSchedule: MobileMesh::active of ", entityName(registry, e),
+                   " was written without patch; followed now, but write it through "
+                   "registry.patch<MobileMesh>(e) so that systems run outside a FrameSchedule "
+                   "see it too");
+    }
 }
 
 void FrameSchedule::checkMeshesUnchanged(const Registry& registry) {

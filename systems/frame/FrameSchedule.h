@@ -75,11 +75,15 @@ private:
     /// Warns, once each, when mesh entities came or went since construction, and when game
     /// code moved a static mesh or edited a Mesh: changes the lighting does not follow.
     void checkMeshesUnchanged(const Registry& registry);
+    /// Patches MobileMesh of mobiles whose `active` game code wrote without patch (the ray
+    /// scene, which only follows patches, disagrees), so every system sees the switch this
+    /// frame; warns once.
+    void followUnpatchedSwitches(Registry& registry);
 
     const Registry* mRegistry = nullptr;
     std::vector<Entity> mMeshes; ///< StaticMesh and MobileMesh entities at construction
     std::size_t mStaticCount = 0, mMobileCount = 0;
-    bool mWarnedMeshChange = false, mWarnedStaticEdit = false;
+    bool mWarnedMeshChange = false, mWarnedStaticEdit = false, mWarnedUnpatched = false;
     std::uint64_t mFramesRun = 0;
     Schedule mSchedule;
     AnimationSystem mAnimation;

@@ -365,7 +365,8 @@ void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& 
                 const float length = glm::length(n);
                 mobile.facetNormals.push_back(length > 0.f ? n / length : glm::vec3(0.f));
             }
-            mSceneBox.extend(transformBox(mobile.objectBounds, mobile.pose));
+            // A pooled mobile out of the world may wait anywhere: not part of the scene's box.
+            if (mobile.active) mSceneBox.extend(transformBox(mobile.objectBounds, mobile.pose));
             mMobileIndex.emplace(e, mMobiles.size());
             mMobiles.push_back(mobile);
         });

@@ -200,7 +200,7 @@ private:
     PhotonTracer mTracer;
     bool mShot = false;
     bool mLoggedShot = false; ///< the first shot's size was logged
-    Aabb mSceneBox;       ///< every mesh at the first shot: the path grid's box
+    Aabb mSceneBox;           ///< every mesh in the world at the first shot: the path grid's box
     Aabb mDirectionalBox; ///< what directional lights cover (PhotonSettings::directionalBounds)
     std::vector<PhotonEmitter> mEmitters; ///< as shot; index = PhotonPath::light
     std::vector<Sweep> mSweeps;           ///< per emitter

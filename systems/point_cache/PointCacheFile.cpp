@@ -93,8 +93,9 @@ std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& 
             if (const Material* mat = registry.tryGet<Material>(e)) h.add(mat->emission);
         });
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
-        [&](Entity e, const MobileMesh&, const Mesh& m, const WorldTransform& w) {
+        [&](Entity e, const MobileMesh& mobile, const Mesh& m, const WorldTransform& w) {
             mesh(e, m, w, true);
+            h.add(std::uint8_t(mobile.active)); // out of the world: no shadow in the cache
             if (const Material* mat = registry.tryGet<Material>(e)) h.add(mat->emission);
         });
     std::vector<PhotonEmitter> lights;

@@ -15,7 +15,8 @@ inline constexpr std::uint32_t kPointCacheFileVersion = 1;
 
 /** Key of a cache file: FNV-1a 64 over the file version, every setting that shapes the point
  *  set or its stored shading (resolved values), the scene's static and mobile meshes (world
- *  matrix, positions, indices, emission) and every light (kind, pose, colour x intensity,
+ *  matrix, positions, indices, emission; for mobiles, whether they are out of the world) and
+ *  every light (kind, pose, colour x intensity,
  *  cone). Any change to those gives a different key, so a file made for another scene or
  *  other settings is never used.                                                           */
 std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& resolved);

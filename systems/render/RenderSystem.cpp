@@ -121,11 +121,17 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
                 irradiance->dirty.push_back({0, std::uint32_t(irradiance->irradiance.size())});
         }
         if (!gpuMesh.vertexArray) return; // rejected until its Mesh changes
-        if (registry.wasChanged<WorldTransform>(e) || registry.wasChanged<MobileMesh>(e))
-            casterChanged = true;
-        // Out of the world for now: not drawn, casts no shadow (its GPU mesh stays for later).
-        if (const MobileMesh* mobile = registry.tryGet<MobileMesh>(e); mobile && !mobile->active)
+        // Out of the world for now (MobileMesh::active): not drawn, casts no shadow; its GPU
+        // mesh stays for later and takes its irradiance uploads meanwhile.
+        const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
+        const bool drawn = !mobile || mobile->active;
+        if (registry.wasChanged<WorldTransform>(e) || drawn != gpuMesh.drawn) casterChanged = true;
+        gpuMesh.drawn = drawn;
+        if (!drawn) {
+            if (irradiance && !irradiance->dirty.empty())
+                uploadIrradiance(gpuMesh, irradiance->irradiance, irradiance->dirty);
             return;
+        }
 
         DrawItem& item = mItems.emplace_back();
         item.mesh = &gpuMesh;

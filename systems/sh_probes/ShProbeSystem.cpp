@@ -426,9 +426,12 @@ void ShProbeSystem::markChanges(const Registry& registry) {
     if (all) {
         markAllStale();
         mVolume->invalidateVisibility();
-        for (auto& [entity, mobile] : mMobiles)
+        for (auto& [entity, mobile] : mMobiles) {
             if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity))
                 mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
+            if (const MobileMesh* tag = registry.tryGet<MobileMesh>(entity))
+                mobile.active = tag->active;
+        }
         return;
     }
 
@@ -453,7 +456,9 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         const MobileMesh* tag = registry.tryGet<MobileMesh>(e);
         const bool active = !tag || tag->active;
         const bool wasActive = std::exchange(mobile.active, active);
-        if (!wasActive && !active) { // moved while out of the world: nothing to see
+        const bool moved = now.min != mobile.worldBounds.min || now.max != mobile.worldBounds.max;
+        // Patched without a change, or moved while out of the world: nothing to see.
+        if ((!wasActive && !active) || (wasActive == active && !moved)) {
             mobile.worldBounds = now;
             continue;
         }

@@ -369,15 +369,33 @@ TEST_F(RenderTest, AnInactiveMobileRendersAsIfItWereNotThere) {
     const Entity block = buildCornellBox(scene);
     mWorld.emplace<MobileMesh>(block);
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
+    FrameProfiler& profiler = mWorld.ctx().emplace<FrameProfiler>();
+    RenderSettings s = settings(ShadingMode::Hybrid);
+    s.passTiming = PassTiming::Cpu;
+    RenderSystem renderer(s);
+    const auto frame = [&] {
+        profiler.beginFrame(mFrame);
+        renderFrames(renderer);
+        profiler.endFrame();
+        return mFrame - 1;
+    };
+    frame();
     const ImageF in = renderer.readHdr();
     mWorld.patch<MobileMesh>(block).active = false;
-    renderFrames(renderer);
+    frame();
     const ImageF out = renderer.readHdr();
+    // While out, irradiance written for it is still taken (nothing piles up meanwhile).
+    VertexIrradiance& lit = mWorld.emplaceOrReplace<VertexIrradiance>(block);
+    lit.irradiance.assign(mWorld.get<Mesh>(block).positions.size(), glm::vec3(0.f));
+    lit.dirty.push_back({0, std::uint32_t(lit.irradiance.size())});
+    frame();
+    EXPECT_TRUE(mWorld.get<VertexIrradiance>(block).dirty.empty());
     mWorld.patch<MobileMesh>(block).active = true;
-    renderFrames(renderer);
+    frame();
     const ImageF back = renderer.readHdr();
+    // Patched to the value it has: the shadow maps are kept.
+    mWorld.patch<MobileMesh>(block).active = true;
+    EXPECT_LT(profiler.sampleMs(frame(), "render/shadow"), 0.0);
     mWorld.destroy(block);
     renderFrames(renderer);
     const ImageF gone = renderer.readHdr();

@@ -12,6 +12,7 @@
 #include "components/StaticMesh.h"
 #include "components/Transform.h"
 #include "components/VertexIrradiance.h"
+#include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -208,6 +209,34 @@ TEST(FrameSchedule, APooledMobileTakenOutAndPutBackIsFollowedWithoutANewSchedule
     for (const std::size_t v : under)
         EXPECT_NEAR(room.floorLight()[v].x, shaded[v].x, 1e-3f * (open[v].x - shaded[v].x))
             << "floor vertex " << v;
+}
+
+TEST(FrameSchedule, ASwitchWrittenWithoutPatchIsFollowedAndNamedOnce) {
+    Room room;
+    room.addTable();
+    FrameSchedule frame(room.registry, lightingOnly());
+    runFrames(frame, room.registry, 1);
+    const std::string log = warningsOf(frame, room.registry, 3, [&] {
+        MobileMesh& table = room.registry.get<MobileMesh>(room.table); // a plain write
+        table.active = !table.active;
+    });
+    EXPECT_TRUE(once(log, "written without patch"));
+    // Three switches: the table is out, and the ray scene and the irradiance agree.
+    EXPECT_FALSE(room.registry.ctx().get<RayScene>().mobileActive(room.table));
+    const auto& light = room.registry.get<VertexIrradiance>(room.table).irradiance;
+    EXPECT_TRUE(std::all_of(light.begin(), light.end(),
+                            [](const glm::vec3& e) { return e == glm::vec3(0.f); }));
+}
+
+TEST(FrameSchedule, APooledMobileWaitingFarAwayIsNotPartOfTheScene) {
+    Room room;
+    room.addTable();
+    room.registry.patch<Transform>(room.table).translation = {0.f, -500.f, 0.f};
+    room.registry.get<MobileMesh>(room.table).active = false;
+    FrameSchedule frame(room.registry, lightingOnly());
+    const SceneInfo& info = room.registry.ctx().get<SceneInfo>();
+    EXPECT_FLOAT_EQ(info.bounds.min.y, 0.f); // the floor's
+    EXPECT_FLOAT_EQ(info.bounds.max.y, 0.f);
 }
 
 TEST(FrameSchedule, MeshesThatComeOrGoUnderARunningScheduleAreNamedOnce) {

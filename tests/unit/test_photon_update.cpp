@@ -29,6 +29,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <memory>
 #include <optional>
 #include <random>
 #include <string>
@@ -554,6 +555,24 @@ TEST_P(MobilesTakenOut, IrradianceEqualsAFullEstimateEveryFrameAndAnInactiveMobi
         if (HasFatalFailure()) return;
     }
     EXPECT_GT(passingOut, 10u);
+
+    // The crate is out. Moving it, or patching the flag to the value it has, changes nothing
+    // and costs nothing: no path re-traced, no mobile re-estimated or republished.
+    ASSERT_FALSE(active[room.crate]);
+    for (int step = 0; step < 2; ++step) {
+        if (step == 0)
+            registry.patch<WorldTransform>(room.crate).matrix = translation(elsewhere);
+        else
+            registry.patch<MobileMesh>(room.cube).active = true;
+        registry.ctx().get<RayScene>().syncMoved(registry);
+        photons.update(registry, FrameContext{100u + std::uint64_t(step), 0.0, 0.f, 0});
+        registry.get<VertexIrradiance>(room.crate).dirty.clear();
+        system.update(registry, FrameContext{100u + std::uint64_t(step), 0.0, 0.f, 0});
+        registry.clearChanges();
+        EXPECT_TRUE(deltaOf(registry).paths.empty()) << "step " << step;
+        EXPECT_EQ(system.lastFrame().movedMobiles, 0u) << "step " << step;
+        EXPECT_TRUE(registry.get<VertexIrradiance>(room.crate).dirty.empty()) << "step " << step;
+    }
 }
 
 INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
@@ -591,6 +610,32 @@ TEST(PhotonUpdate, AnEmissiveMobileTakenOutStopsShiningAndPutBackShinesAgain) {
         EXPECT_EQ(shines(), active);
     }
     EXPECT_TRUE(sameStore(storeOf(registry), first));
+}
+
+TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
+    // The crate waits out of the world 50 m away; the sun's photons still spread over the room
+    // alone: the ray set is the one of the room without the crate, bit for bit.
+    const auto shoot = [](bool parked) {
+        auto registry = std::make_unique<Registry>();
+        const test::Room room = buildRoom(*registry, kCubeRest, kCrateRest);
+        if (parked) {
+            registry->patch<WorldTransform>(room.crate).matrix = translation({50.f, 0.f, 0.f});
+            registry->get<MobileMesh>(room.crate).active = false;
+        } else {
+            registry->destroy(room.crate);
+        }
+        const Entity sun = registry->create(); // its -Z axis points down
+        registry->emplace<WorldTransform>(
+            sun, glm::rotate(glm::mat4(1.f), -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f)));
+        registry->emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 1.f});
+        buildRayScene(*registry);
+        PhotonUpdateSystem system(settingsWith(20'000));
+        firstUpdate(*registry, system);
+        return registry;
+    };
+    const auto parked = shoot(true);
+    const auto absent = shoot(false);
+    EXPECT_TRUE(sameStore(storeOf(*parked), storeOf(*absent)));
 }
 
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {

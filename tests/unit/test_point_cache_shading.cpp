@@ -455,6 +455,18 @@ TEST(PointCacheFile, CorruptTruncatedAndStaleFilesAreRejectedAndRebuilt) {
     std::filesystem::remove_all(std::filesystem::path(file).parent_path());
 }
 
+TEST(PointCacheFile, AMobileOutOfTheWorldChangesTheKey) {
+    // A file baked with a pooled blocker in the world holds its shadow: it must not load for a
+    // start with the blocker out.
+    ShadowScene scene(true, /*blockerMobile=*/true);
+    const PointCacheSettings settings;
+    const std::uint64_t in = pointCacheKey(scene.registry, settings);
+    scene.registry.get<MobileMesh>(scene.blocker).active = false;
+    EXPECT_NE(pointCacheKey(scene.registry, settings), in);
+    scene.registry.get<MobileMesh>(scene.blocker).active = true;
+    EXPECT_EQ(pointCacheKey(scene.registry, settings), in);
+}
+
 // ---- per-frame update ---------------------------------------------------------------------------
 
 /// A small point set over the shadow scene, re-shading 40 points a frame.

@@ -903,6 +903,9 @@ TEST(ShProbes, AMobileTakenOutAndPutBackRefreshesItsRegion) {
     const auto back = room.probes();
     for (std::uint32_t p = 0; p < before.size(); ++p)
         EXPECT_TRUE(sameSh(back[p], before[p])) << "probe " << p;
+    // Patched to the value it has: nothing to refresh.
+    setActive(true, 5);
+    EXPECT_EQ(room.system.lastFrame().markedStale, 0u);
 }
 
 TEST(ShProbes, UpdateBudgetIsRespectedNearestAvatarFirst) {
