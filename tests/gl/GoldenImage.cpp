@@ -26,7 +26,7 @@ RefRange roundingRange(const std::vector<RefTriangle>& triangles,
         extend(light.position);
     extend(camera.position);
     RefPerturbation perturbation;
-    perturbation.pointOffset = std::ldexp(largest, -21);
+    perturbation.pointOffset = std::ldexp(largest, -18);
     perturbation.shadeEveryOffsetRay = true;
     return referenceRange(triangles, lights, camera, perturbation);
 }
