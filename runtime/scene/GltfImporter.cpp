@@ -426,24 +426,22 @@ bool GltfReader::nodeStandIn(int index) const {
     return standIn.Get<bool>();
 }
 
-bool GltfReader::nodePointCache(int index) const {
+bool GltfReader::nodeMeshFlag(int index, const char* key, bool absent) const {
     const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
-    if (!extras.IsObject() || !extras.Has("pointCache")) return false;
-    const std::string field = str("nodes[", index, "].extras.pointCache");
-    const tinygltf::Value& value = extras.Get("pointCache");
+    if (!extras.IsObject() || !extras.Has(key)) return absent;
+    const std::string field = str("nodes[", index, "].extras.", key);
+    const tinygltf::Value& value = extras.Get(key);
     if (!value.IsBool()) fail(field, "must be true or false");
     if (mModel.nodes[std::size_t(index)].mesh == -1) fail(field, "set on a node without a mesh");
     return value.Get<bool>();
 }
 
+bool GltfReader::nodePointCache(int index) const {
+    return nodeMeshFlag(index, "pointCache", false);
+}
+
 bool GltfReader::nodeActive(int index) const {
-    const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
-    if (!extras.IsObject() || !extras.Has("active")) return true;
-    const std::string field = str("nodes[", index, "].extras.active");
-    const tinygltf::Value& value = extras.Get("active");
-    if (!value.IsBool()) fail(field, "must be true or false");
-    if (mModel.nodes[std::size_t(index)].mesh == -1) fail(field, "set on a node without a mesh");
-    return value.Get<bool>();
+    return nodeMeshFlag(index, "active", true);
 }
 
 std::optional<Mobility> GltfReader::nodeMobility(int index) const {

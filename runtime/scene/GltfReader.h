@@ -213,6 +213,8 @@ private:
     Transform localTransform(int index) const;
     std::optional<Mobility> nodeMobility(int index) const;
     bool nodeStandIn(int index) const;
+    /// Node extras {key: bool} on a node with a mesh; `absent` when the extras do not say.
+    bool nodeMeshFlag(int index, const char* key, bool absent) const;
     bool nodePointCache(int index) const;
     /// Node extras {"active": bool} (default true), on a node with a mesh.
     bool nodeActive(int index) const;
