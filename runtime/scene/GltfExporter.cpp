@@ -34,6 +34,7 @@
 #include "components/Transform.h"
 #include "runtime/core/Log.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 #include "runtime/scene/TextureLibrary.h"
 
 #include <tiny_gltf.h>
@@ -183,8 +184,7 @@ tinygltf::Value mobilityExtras(const Registry& registry, Entity e) {
     const char* mobility = registry.has<MobileMesh>(e) ? "mobile" : "static";
     Object extras{{"mobility", tinygltf::Value(std::string(mobility))}};
     if (registry.has<PointCacheShaded>(e)) extras["pointCache"] = tinygltf::Value(true);
-    if (const MobileMesh* mobile = registry.tryGet<MobileMesh>(e); mobile && !mobile->active)
-        extras["active"] = tinygltf::Value(false);
+    if (outOfWorld(registry, e)) extras["active"] = tinygltf::Value(false);
     return tinygltf::Value(std::move(extras));
 }
 

@@ -57,10 +57,9 @@ SceneInfo describeMeshes(const Registry& registry) {
     info.source = "code";
     registry.view<const Mesh, const WorldTransform>().each(
         [&](Entity e, const Mesh& mesh, const WorldTransform& world) {
-            const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
-            if (!registry.has<StaticMesh>(e) && !mobile) return;
+            if (!registry.has<StaticMesh>(e) && !registry.has<MobileMesh>(e)) return;
             // A pooled mobile out of the world may wait anywhere: not part of the scene's box.
-            const bool placed = !mobile || mobile->active;
+            const bool placed = !outOfWorld(registry, e);
             std::vector<glm::vec3> points(mesh.positions.size());
             for (std::size_t i = 0; i < points.size(); ++i) {
                 points[i] = glm::vec3(world.matrix * glm::vec4(mesh.positions[i], 1.f));

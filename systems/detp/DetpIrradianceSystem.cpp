@@ -7,6 +7,7 @@
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 
@@ -148,8 +149,7 @@ bool DetpIrradianceSystem::mobileActive(const Registry& registry, Entity mobile)
     // The ray scene's view, which the photons were traced against, when it has the mobile.
     if (const RayScene* scene = registry.ctx().find<RayScene>(); scene && scene->isMobile(mobile))
         return scene->mobileActive(mobile);
-    const MobileMesh* tag = registry.tryGet<MobileMesh>(mobile);
-    return !tag || tag->active;
+    return !outOfWorld(registry, mobile);
 }
 
 void DetpIrradianceSystem::collectMovedMobiles(const Registry& registry, const PhotonDelta& delta) {

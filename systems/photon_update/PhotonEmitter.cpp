@@ -157,8 +157,8 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
                 const glm::vec3& l = material.emission;
                 // Only meshes the ray scene holds take part in photon transport; a mobile out of
                 // the world (MobileMesh::active) shines no light.
-                const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
-                const bool traced = registry.has<StaticMesh>(e) || (mobile && mobile->active);
+                const bool traced = registry.has<StaticMesh>(e) ||
+                                    (registry.has<MobileMesh>(e) && !outOfWorld(registry, e));
                 if (traced && (l.x != 0.f || l.y != 0.f || l.z != 0.f))
                     add(EmitterKind::Surface, e, world.matrix).radiant = l;
             });

@@ -444,8 +444,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     store.paths.clear();
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
-        store.lights.push_back(
-            {e.entity, e.power, e.photonCount, e.directDrawn});
+        store.lights.push_back({e.entity, e.power, e.photonCount, e.directDrawn});
         store.emittedPower += e.power;
         store.paths.resize(store.paths.size() + e.photonCount, PhotonPath{0, 0, std::uint16_t(l)});
     }
@@ -512,10 +511,7 @@ void PhotonUpdateSystem::findMovedMobiles(const Registry& registry, const RaySce
                        "moves in)");
         }
     };
-    for (const Entity e : registry.changed<WorldTransform>())
-        follow(e);
-    for (const Entity e : registry.changed<MobileMesh>())
-        follow(e);
+    forEachMovedOrSwitched(registry, follow);
     mStats.movedMobiles = mMoved.size();
 }
 

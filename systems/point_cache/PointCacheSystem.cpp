@@ -9,6 +9,7 @@
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/point_cache/PointCacheFile.h"
 
@@ -109,7 +110,7 @@ void PointCacheSystem::build(Registry& registry) {
                 box.extend(p);
             if (box.empty()) return;
             mMobiles[e] = MobileBound{box.center(), 0.5f * glm::length(box.extent()), world.matrix,
-                                      registry.get<MobileMesh>(e).active};
+                                      !outOfWorld(registry, e)};
         });
     mNeedsFull = true;
     mBuilt = true;
@@ -166,15 +167,15 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         const auto it = mMobiles.find(e);
         if (it == mMobiles.end()) return;
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);
-        const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
-        if (!world || !mobile) return;
+        if (!world) return;
         MobileBound& m = it->second;
-        if (m.pose == world->matrix && m.active == mobile->active) return; // nothing changed
-        if (!m.active && !mobile->active) { // moved while out of the world: shadows nothing
+        const bool active = !outOfWorld(registry, e);
+        if (m.pose == world->matrix && m.active == active) return; // nothing changed
+        if (!m.active && !active) { // moved while out of the world: shadows nothing
             m.pose = world->matrix;
             return;
         }
-        m.active = mobile->active;
+        m.active = active;
         Move move;
         move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));
         move.radiusBefore = m.radius * maxScale(m.pose);
@@ -183,10 +184,7 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         m.pose = world->matrix;
         if (std::isfinite(move.after.x) && std::isfinite(move.radiusAfter)) moves.push_back(move);
     };
-    for (const Entity e : registry.changed<WorldTransform>())
-        follow(e);
-    for (const Entity e : registry.changed<MobileMesh>())
-        follow(e);
+    forEachMovedOrSwitched(registry, follow);
     if (moves.empty() || cache.size() == 0) return;
     // Whether a segment from some x within h of q to a light passes a moved mobile (old or new
     // pose): moving an end of a segment by h moves each of its points by at most h, so

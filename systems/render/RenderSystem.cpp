@@ -1,6 +1,5 @@
 #include "systems/render/RenderSystem.h"
 
-#include "runtime/scene/SceneQueries.h"
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/DirectionalLight.h"
@@ -19,6 +18,7 @@
 #include "runtime/io/Png.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GpuTexture.h"
+#include "runtime/scene/SceneQueries.h"
 #include "runtime/scene/TextureLibrary.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/render/GpuResources.h"
@@ -123,8 +123,7 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
         if (!gpuMesh.vertexArray) return; // rejected until its Mesh changes
         // Out of the world for now (MobileMesh::active): not drawn, casts no shadow; its GPU
         // mesh stays for later and takes its irradiance uploads meanwhile.
-        const MobileMesh* mobile = registry.tryGet<MobileMesh>(e);
-        const bool drawn = !mobile || mobile->active;
+        const bool drawn = !outOfWorld(registry, e);
         if (registry.wasChanged<WorldTransform>(e) || drawn != gpuMesh.drawn) casterChanged = true;
         gpuMesh.drawn = drawn;
         if (!drawn) {
@@ -178,7 +177,8 @@ const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
     t.directionCount = int(dirs.size());
     t.center = v.center();
     t.radius = v.radius();
-    for (const glm::vec3& d : dirs.directions()) t.directions.emplace_back(d, 0.f);
+    for (const glm::vec3& d : dirs.directions())
+        t.directions.emplace_back(d, 0.f);
     for (std::uint32_t i = 0; i < dirs.triangleCount(); ++i) {
         glm::ivec4 code(0);
         for (int k = 0; k < 3; ++k)
@@ -213,7 +213,8 @@ bool RenderSystem::syncPointCache(const Registry& registry) {
         mCacheCellPoints = createBuffer();
         const auto starts = cache->grid.cellStart();
         const auto entries = cache->grid.cellPoints();
-        glNamedBufferStorage(mCacheCellStart.id(), GLsizeiptr(starts.size_bytes()), starts.data(), 0);
+        glNamedBufferStorage(mCacheCellStart.id(), GLsizeiptr(starts.size_bytes()), starts.data(),
+                             0);
         const std::uint32_t none = 0;
         glNamedBufferStorage(mCacheCellPoints.id(),
                              GLsizeiptr(entries.empty() ? sizeof none : entries.size_bytes()),
@@ -233,7 +234,8 @@ bool RenderSystem::syncPointCache(const Registry& registry) {
     if (newSet || mCacheVersion != cache->shadingVersion) {
         mCacheStaging.resize(cache->size() * 3);
         for (std::size_t p = 0; p < cache->size(); ++p) {
-            mCacheStaging[3 * p] = glm::vec4(cache->position[p], cache->searchRadius(std::uint32_t(p)));
+            mCacheStaging[3 * p] =
+                glm::vec4(cache->position[p], cache->searchRadius(std::uint32_t(p)));
             mCacheStaging[3 * p + 1] = glm::vec4(cache->normal[p], cache->ao[p]);
             mCacheStaging[3 * p + 2] =
                 glm::vec4(cache->direct[p] + cache->indirect[p], cache->radius[p]);

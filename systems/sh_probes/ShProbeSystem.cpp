@@ -111,7 +111,7 @@ void ShProbeSystem::build(Registry& registry) {
             for (const glm::vec3& p : mesh.positions)
                 m.objectBounds.extend(p);
             m.worldBounds = transformBox(m.objectBounds, world.matrix);
-            m.active = registry.get<MobileMesh>(e).active;
+            m.active = !outOfWorld(registry, e);
             mMobiles.emplace(e, m);
         });
     mBuilt = true;
@@ -429,8 +429,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         for (auto& [entity, mobile] : mMobiles) {
             if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity))
                 mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
-            if (const MobileMesh* tag = registry.tryGet<MobileMesh>(entity))
-                mobile.active = tag->active;
+            mobile.active = !outOfWorld(registry, entity);
         }
         return;
     }
@@ -441,26 +440,21 @@ void ShProbeSystem::markChanges(const Registry& registry) {
     if (!mSettings.hybrid &&
         (!registry.changed<WorldTransform>().empty() || !registry.changed<MobileMesh>().empty()))
         snapshotLights(registry);
-    mChangedMobiles.assign(registry.changed<WorldTransform>().begin(),
-                           registry.changed<WorldTransform>().end());
-    mChangedMobiles.insert(mChangedMobiles.end(), registry.changed<MobileMesh>().begin(),
-                           registry.changed<MobileMesh>().end());
-    for (const Entity e : mChangedMobiles) {
+    forEachMovedOrSwitched(registry, [&](Entity e) {
         const auto it = mMobiles.find(e);
-        if (it == mMobiles.end()) continue;
+        if (it == mMobiles.end()) return;
         const WorldTransform* world = registry.tryGet<WorldTransform>(e);
-        if (!world || !isFinite(world->matrix)) continue;
+        if (!world || !isFinite(world->matrix)) return;
         Mobile& mobile = it->second;
-        if (mobile.objectBounds.empty()) continue; // no vertices: nothing to see or hide
+        if (mobile.objectBounds.empty()) return; // no vertices: nothing to see or hide
         const Aabb now = transformBox(mobile.objectBounds, world->matrix);
-        const MobileMesh* tag = registry.tryGet<MobileMesh>(e);
-        const bool active = !tag || tag->active;
+        const bool active = !outOfWorld(registry, e);
         const bool wasActive = std::exchange(mobile.active, active);
         const bool moved = now.min != mobile.worldBounds.min || now.max != mobile.worldBounds.max;
         // Patched without a change, or moved while out of the world: nothing to see.
         if ((!wasActive && !active) || (wasActive == active && !moved)) {
             mobile.worldBounds = now;
-            continue;
+            return;
         }
         // Reach: the influence distance, or as far as the mobile still covers the given
         // share of a probe's sphere of directions.
@@ -482,7 +476,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
                         mVolume->setVisibilityReady(grid.cellIndex({x, y, z}), false);
         }
         mobile.worldBounds = now;
-    }
+    });
 
     // The delta's end points: where per-vertex irradiance can have changed. They are counted
     // on a lattice of half the probe spacing first (a moving mobile re-traces thousands of

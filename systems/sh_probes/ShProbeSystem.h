@@ -163,7 +163,6 @@ private:
     ProbeVolume* mVolume = nullptr;
     glm::vec3 mEnvironment{0.f};
     std::unordered_map<Entity, Mobile> mMobiles;
-    std::vector<Entity> mChangedMobiles; ///< markChanges: moved, taken out or put back
     std::vector<std::uint8_t> mStale;
     std::size_t mStaleCount = 0;
     FrameStats mStats;
