@@ -176,6 +176,8 @@ int runDemo(const DemoOptions& options) {
     windowSettings.width = options.width;
     windowSettings.height = options.height;
     windowSettings.headless = options.headless;
+    windowSettings.platform = options.context == "egl" ? GlPlatform::Egl : GlPlatform::Window;
+    windowSettings.debugContext = windowSettings.debugContext || options.glDebug;
     windowSettings.title = "qgi - " + options.scene;
     GlWindow window(windowSettings);
 

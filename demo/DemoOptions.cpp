@@ -81,6 +81,14 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--scene", o.scene, "Built-in scene (" + builtinList() + ") or a .gltf/.glb file");
     app.add_flag("--headless", o.headless,
                  "Render offscreen (hidden window), follow the scripted camera path with a fixed time step");
+    app.add_option("--context", o.context,
+                   "Where the OpenGL context comes from: window (a GLFW window; headless runs "
+                   "need an X server such as Xvfb) or egl (an offscreen pbuffer on the first GPU "
+                   "through EGL, for machines without X; implies --headless)")
+        ->check(CLI::IsMember({"window", "egl"}));
+    app.add_flag("--gl-debug", o.glDebug,
+                 "OpenGL debug context: the driver's errors and warnings go to the log (on in "
+                 "debug builds)");
     app.add_option("--frames", o.frames,
                    "Frames to run; 0 runs until the window closes (headless: 240)")
         ->transform(wholeNumber())
@@ -179,6 +187,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         result.exitCode = 2;
         return result;
     }
+    if (o.context == "egl") o.headless = true;
     if (o.headless && o.frames == 0) o.frames = 240;
     return result;
 }

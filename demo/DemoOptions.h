@@ -10,6 +10,8 @@ namespace qgi::demo {
 struct DemoOptions {
     std::string scene = "atrium"; ///< built-in name or .gltf/.glb path
     bool headless = false;        ///< hidden window, scripted camera, fixed time step
+    bool glDebug = false;         ///< GL debug context: the driver's messages go to the log
+    std::string context = "window"; ///< "window" (GLFW) or "egl" (pbuffer, no X; implies headless)
     int frames = 0;               ///< frames to run; 0: until the window closes (headless: 240)
     int width = 1280;
     int height = 720;

@@ -3,6 +3,7 @@
 #include "components/Mesh.h"
 
 #include <algorithm>
+#include <vector>
 
 namespace qgi {
 namespace {
@@ -38,11 +39,14 @@ GpuMesh createGpuMesh(const Mesh& mesh) {
     const std::vector<glm::vec2> noUvs(mesh.uvs.empty() ? mesh.positions.size() : 0);
     gpu.uvs = createStaticBuffer<glm::vec2>(mesh.uvs.empty() ? noUvs : mesh.uvs);
 
+    // Zero irradiance until the first upload. The zeros come with the storage rather than from
+    // glClearNamedBufferData: NVIDIA's driver (580) let such a clear land after the first
+    // glNamedBufferSubData of a large buffer, and every vertex stayed black until it next
+    // changed.
     gpu.irradiance = createBuffer();
-    const GLsizeiptr irradianceBytes =
-        GLsizeiptr(std::max<std::size_t>(mesh.positions.size() * sizeof(glm::vec3), 1));
-    glNamedBufferStorage(gpu.irradiance.id(), irradianceBytes, nullptr, GL_DYNAMIC_STORAGE_BIT);
-    glClearNamedBufferData(gpu.irradiance.id(), GL_R32F, GL_RED, GL_FLOAT, nullptr);
+    const std::vector<glm::vec3> zeros(std::max<std::size_t>(mesh.positions.size(), 1));
+    glNamedBufferStorage(gpu.irradiance.id(), GLsizeiptr(zeros.size() * sizeof(glm::vec3)),
+                         zeros.data(), GL_DYNAMIC_STORAGE_BIT);
 
     gpu.vertexArray = createVertexArray();
     const GLuint vao = gpu.vertexArray.id();

@@ -1,14 +1,13 @@
 #include "runtime/render/SceneRenderer.h"
 
 #include "runtime/core/Log.h"
+#include "runtime/render/GlWindow.h"
 #include "runtime/render/GpuMesh.h"
 #include "runtime/render/GpuTexture.h"
 #include "runtime/render/PipelineState.h"
 #include "runtime/render/ShaderInterface.h"
 #include "runtime/render/ShaderLoader.h"
 
-#define GLFW_INCLUDE_NONE
-#include <GLFW/glfw3.h>
 #include <glm/gtc/matrix_inverse.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
@@ -307,10 +306,8 @@ void SceneRenderer::tonemapAndPresent() {
     glDrawArrays(GL_TRIANGLES, 0, 3);
 
     // Present: scale the tonemapped image to the window's framebuffer.
-    GLFWwindow* window = glfwGetCurrentContext();
-    if (!window) return;
     int width = 0, height = 0;
-    glfwGetFramebufferSize(window, &width, &height);
+    if (!GlWindow::currentFramebufferSize(width, height)) return;
     const bool sameSize = width == mSettings.width && height == mSettings.height;
     glBlitNamedFramebuffer(mLdrTarget.id(), 0, 0, 0, mSettings.width, mSettings.height, 0, 0, width,
                            height, GL_COLOR_BUFFER_BIT, sameSize ? GL_NEAREST : GL_LINEAR);

@@ -1,8 +1,10 @@
 #pragma once
 // The scene and frame loop the renderer benchmarks share: a 4 m room of five 20k-triangle walls
 // (100k triangles) with per-vertex irradiance, one spot light and a camera, drawn at 1280x720
-// in a headless window (run under `xvfb-run -a`).
+// in a headless window (run under `xvfb-run -a`, or with QGI_GL_CONTEXT=egl on a GPU machine
+// without X).
 
+#include "GlTestWindow.h"
 #include "components/Camera.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
@@ -46,15 +48,10 @@ inline Mesh gridMesh(int n, bool wavy) {
     return mesh;
 }
 
-/// One window for every case: the context outlives each case's registry and renderer.
+/// One window for every case: the context outlives each case's registry and renderer. With
+/// QGI_GL_CONTEXT=egl in the environment it is an EGL pbuffer (a GPU machine without X).
 inline GlWindow& context() {
-    static GlWindow window([] {
-        WindowSettings settings;
-        settings.width = kWidth;
-        settings.height = kHeight;
-        settings.headless = true;
-        return settings;
-    }());
+    static GlWindow window(test::testWindow(kWidth, kHeight, "qgi benchmark"));
     return window;
 }
 

@@ -2,6 +2,7 @@
 // the renderer's hybrid-mode direct light at time 0 against the independent CPU ray caster in
 // ReferenceTracer.cpp, both fed from the same registry.
 
+#include "GlTestWindow.h"
 #include "GoldenImage.h"
 #include "ReferenceTracer.h"
 
@@ -150,14 +151,9 @@ double medianLitRadiance(const ImageF& image) {
 class BuiltinCornellTest : public ::testing::Test {
 protected:
     void SetUp() override {
-        if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
-            GTEST_SKIP() << "no display: run the GL tests under 'xvfb-run -a'";
-        WindowSettings settings;
-        settings.width = kWidth;
-        settings.height = kHeight;
-        settings.headless = true;
-        settings.title = "qgi test_render_cornell";
-        mWindow = std::make_unique<GlWindow>(settings);
+        QGI_SKIP_WITHOUT_GL();
+        mWindow = std::make_unique<GlWindow>(
+            test::testWindow(kWidth, kHeight, "qgi test_render_cornell"));
     }
 
     std::unique_ptr<GlWindow> mWindow;
@@ -219,6 +215,69 @@ TEST_F(BuiltinCornellTest, DirectLightMatchesCpuReference) {
     if (c.failed > 0)
         test::writeFailureImages(fs::path(QGI_TEST_OUTPUT_DIR), "builtin_cornell", actual,
                                  reference.radiance);
+}
+
+/// What a frame of the built-in Cornell box leaves in the renderer's HDR target and in the
+/// context's default framebuffer (where the renderer presents it), drawn in a context of the
+/// given platform.
+struct PlatformFrame {
+    std::string renderer; ///< GL_RENDERER
+    ImageF hdr;
+    Image8 ldr;
+    std::vector<std::uint8_t> presented; ///< the default framebuffer, RGBA8, top row first
+};
+
+PlatformFrame drawCornell(GlPlatform platform) {
+    WindowSettings windowSettings = test::testWindow(kWidth, kHeight, "qgi test_render_cornell");
+    windowSettings.platform = platform;
+    GlWindow window(windowSettings);
+    PlatformFrame frame;
+    frame.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+    Registry world; // its GPU resources go before the context does
+    buildCornell(world);
+    RenderSettings settings;
+    settings.width = kWidth;
+    settings.height = kHeight;
+    settings.mode = ShadingMode::Hybrid;
+    RenderSystem renderer(settings);
+    renderer.update(world, FrameContext{});
+    frame.hdr = renderer.readHdr();
+    frame.ldr = renderer.readLdr();
+    GLint drawBuffer = GL_BACK;
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glGetIntegerv(GL_DRAW_BUFFER, &drawBuffer);
+    glReadBuffer(GLenum(drawBuffer));
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    const std::size_t row = std::size_t(kWidth) * 4;
+    std::vector<std::uint8_t> bottomFirst(row * kHeight, 0);
+    glReadPixels(0, 0, kWidth, kHeight, GL_RGBA, GL_UNSIGNED_BYTE, bottomFirst.data());
+    for (int y = kHeight - 1; y >= 0; --y)
+        frame.presented.insert(frame.presented.end(), bottomFirst.begin() + std::ptrdiff_t(row * y),
+                               bottomFirst.begin() + std::ptrdiff_t(row * (y + 1)));
+    return frame;
+}
+
+// An EGL pbuffer (GlPlatform::Egl, the demo's --context egl for GPU machines without X) is only
+// another place for the context: the frame it draws is the window's, bit for bit, when both
+// reach the same driver (here Mesa's llvmpipe through GLX and through EGL's device platform),
+// and the renderer presents into the pbuffer as into the window.
+TEST(GlPlatform, EglPbufferDrawsTheWindowsFrame) {
+    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
+        GTEST_SKIP() << "no display for the window to compare with: run under 'xvfb-run -a'";
+    const PlatformFrame window = drawCornell(GlPlatform::Window);
+    const PlatformFrame egl = drawCornell(GlPlatform::Egl);
+    if (egl.renderer != window.renderer)
+        GTEST_SKIP() << "EGL reaches '" << egl.renderer << "', the window '" << window.renderer
+                     << "': different drivers need not agree bit for bit";
+
+    const auto brightest = *std::max_element(window.hdr.rgba.begin(), window.hdr.rgba.end());
+    ASSERT_GT(brightest, 0.f) << "the window's frame is black: nothing to compare";
+    ASSERT_EQ(egl.hdr.rgba.size(), window.hdr.rgba.size());
+    EXPECT_TRUE(egl.hdr.rgba == window.hdr.rgba) << "the HDR frames differ";
+    EXPECT_TRUE(egl.ldr.rgba == window.ldr.rgba) << "the tonemapped frames differ";
+    // Presenting is a same-size blit: the default framebuffer holds the tonemapped frame.
+    EXPECT_TRUE(window.presented == window.ldr.rgba) << "the window did not receive the frame";
+    EXPECT_TRUE(egl.presented == egl.ldr.rgba) << "the pbuffer did not receive the frame";
 }
 
 // A regression tripwire for the CPU reference, not a test of the renderer (the test above

@@ -1,5 +1,6 @@
 // The fragment shader's point-cache blend (shaders/common/pointcache.glsl) against the CPU
 // query (PointCache::sample) it mirrors, pixel by pixel (runs under `xvfb-run -a`).
+#include "GlTestWindow.h"
 #include "components/Camera.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
@@ -27,14 +28,8 @@ constexpr int kSize = 96;
 constexpr float kAlbedo = 0.5f, kHeight = 3.f, kFov = 0.9f;
 
 TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
-    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
-        GTEST_SKIP() << "no display: run the GL tests under 'xvfb-run -a'";
-    WindowSettings window;
-    window.width = kSize;
-    window.height = kSize;
-    window.headless = true;
-    window.title = "qgi test_render_point_cache";
-    GlWindow context(window);
+    QGI_SKIP_WITHOUT_GL();
+    GlWindow context(test::testWindow(kSize, kSize, "qgi test_render_point_cache"));
     {
         Registry world;
         // A 4 x 4 m floor at y = 0 facing up, no lights: only the cache lights it.

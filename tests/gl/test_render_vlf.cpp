@@ -2,6 +2,7 @@
 // is a mirror and whose walls emit, seen from above; every floor pixel must show what the CPU
 // lookup (Vlf::specularRadiance, tested against closed forms in test_vlf_bake) gives for the
 // same point and view direction, within what float rounding of that point can change.
+#include "GlTestWindow.h"
 #include "components/Camera.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
@@ -45,14 +46,8 @@ Material emitter(float L) {
 }
 
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
-    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
-        GTEST_SKIP() << "no display: run the GL tests under 'xvfb-run -a'";
-    WindowSettings ws;
-    ws.width = kSize;
-    ws.height = kSize;
-    ws.headless = true;
-    ws.title = "qgi test_render_vlf";
-    GlWindow window(ws);
+    QGI_SKIP_WITHOUT_GL();
+    GlWindow window(test::testWindow(kSize, kSize, "qgi test_render_vlf"));
     {
         Registry world;
         Material mirror;

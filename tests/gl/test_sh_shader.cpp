@@ -3,6 +3,7 @@
 // harmonics in test_sh_math): each of the nine coefficients on its own, over six normals,
 // per pixel. A swapped coefficient or a misplaced convolution constant in the shader fails the
 // coefficient it touches.
+#include "GlTestWindow.h"
 #include "components/Avatar.h"
 #include "components/Camera.h"
 #include "components/Material.h"
@@ -42,14 +43,8 @@ Mesh squareFacing(const glm::vec3& c, const glm::vec3& n) {
 }
 
 TEST(ShShader, EachCoefficientShadesAsTheCpuIrradiance) {
-    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
-        GTEST_SKIP() << "no display: run the GL tests under 'xvfb-run -a'";
-    WindowSettings windowSettings;
-    windowSettings.width = kSize;
-    windowSettings.height = kSize;
-    windowSettings.headless = true;
-    windowSettings.title = "qgi test_sh_shader";
-    GlWindow window(windowSettings);
+    QGI_SKIP_WITHOUT_GL();
+    GlWindow window(test::testWindow(kSize, kSize, "qgi test_sh_shader"));
     {
         Registry world; // destroyed while the context is current
         const Entity camera = world.create();
