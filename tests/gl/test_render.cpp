@@ -183,7 +183,11 @@ public:
     /// The reference's range (test::referenceRange) for a renderer with `settings`, drawing
     /// into the current GL context: camera rays offset by the rasterizer's sub-pixel precision
     /// (2^-GL_SUBPIXEL_BITS of a pixel; a vertex snapped to that grid moves an edge by at most
-    /// half of it along each axis), and shadow texels of the size ShadowMaps::assign gives
+    /// half of it along each axis, and the attributes interpolated at the pixel centre are
+    /// those of a point moved as far: every offset ray is shaded, so on steep gradients, such
+    /// as a ceiling 2 cm above a point light, the range holds the shading at the moved point;
+    /// NVIDIA's snapping moves it by 0.1-0.2 % there), and shadow texels of the size
+    /// ShadowMaps::assign gives
     /// them (the shader's LightBlock position.w): a cube face spans 90 degrees, a spot map the
     /// outer cone plus a texel each side, a directional map the caster box's bounding sphere.
     test::RefRange range(const RenderSettings& settings) const {
@@ -191,6 +195,7 @@ public:
         glGetIntegerv(GL_SUBPIXEL_BITS, &subpixelBits);
         test::RefPerturbation perturbation;
         perturbation.rayOffset = std::ldexp(1.0, -subpixelBits);
+        perturbation.shadeEveryOffsetRay = true;
         const double size = double(settings.shadowMapSize);
         const double radius = std::max(0.5 * glm::length(glm::dvec3(mCasterHi - mCasterLo)), 1e-3);
         for (const test::RefLight& light : mLights) {
@@ -235,9 +240,9 @@ Entity buildCornellBox(SceneBuilder& scene) {
 
 // ---- image comparison ----------------------------------------------------------------------
 
-// Where the GPU and the reference evaluate the same formula at the same pixel centre: float32
-// interpolation of world positions (~1e-6 m at ~2 m) moves 1/d^2 and cos by ~1e-5 relative,
-// so 1e-3 leaves a factor 100 of headroom.
+// Where the GPU and the reference evaluate the same formula at the same point (the range holds
+// the point's movement by vertex snapping): float32 interpolation of world positions (~1e-6 m
+// at ~2 m) moves 1/d^2 and cos by ~1e-5 relative, so 1e-3 leaves a factor 100 of headroom.
 constexpr double kPixelTolerance = 1e-3;
 
 /// Checks an HDR frame against the CPU reference. A pixel may differ from the reference only
