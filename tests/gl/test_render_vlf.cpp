@@ -15,11 +15,13 @@
 #include "systems/vlf/VlfSystem.h"
 #include "tests/unit/test_meshes.h"
 
+#include <epoxy/gl.h>
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
+#include <optional>
 #include <string>
 
 namespace qgi {
@@ -96,15 +98,23 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
             return field.vlf.specularRadiance(face, glm::vec3(p),
                                               glm::vec3(glm::normalize(eyeAt - p)));
         };
-        // Where the GPU's floor point may lie: its world position is interpolated in float
-        // (planes of p/w and 1/w evaluated at the pixel, then divided), some 16 roundings of
-        // terms below 2 m, each up to 2^-23 m: ~2e-6 m. The view direction it takes from that
-        // point rounds by ~2^-23 rad, < 1e-6 m at the <= 2.5 m from the eye. kEpsilon covers
-        // both with a factor above 2: the GPU may show any value the lookup takes within
-        // kEpsilon of the exact point along either floor axis. The lookup is piecewise
-        // bilinear in the point: over so small a square its range is that of the corners and
-        // edge midpoints.
-        constexpr double kEpsilon = 0x1p-17; // metres, 7.6e-6
+        // Where the GPU's floor point may lie. The rasterizer snaps vertices to its sub-pixel
+        // grid (2^-GL_SUBPIXEL_BITS of a pixel), so the position a pixel interpolates is that
+        // of a point whose ray passes up to that far from the pixel centre in x and y: about
+        // 8e-5 m on this floor, where NVIDIA's pixels showed the lookup up to 3.6 times the
+        // allowance below away from the centre's value. That position is interpolated in
+        // float (planes of p/w and 1/w evaluated at the pixel, then divided), some 16 roundings
+        // of terms below 2 m, each up to 2^-23 m: ~2e-6 m; the view direction it takes from
+        // that point rounds by ~2^-23 rad, < 1e-6 m at the <= 2.5 m from the eye. kEpsilon
+        // covers both with a factor above 2. So the GPU may show any value the lookup takes at
+        // the points of the rays through the square of +-rayOffset pixels about the centre,
+        // each widened by kEpsilon along either floor axis. The lookup is piecewise bilinear in
+        // the point: over so small a square its range is that of the corners and edge
+        // midpoints.
+        GLint subpixelBits = 0;
+        glGetIntegerv(GL_SUBPIXEL_BITS, &subpixelBits);
+        const double rayOffset = std::ldexp(1.0, -subpixelBits); // pixels
+        constexpr double kEpsilon = 0x1p-17;                     // metres, 7.6e-6
         // The lookup's own arithmetic: ~20 roundings of positive terms in each blend (12 cells,
         // 3 corners, the divisions), ~10 more in the weights, whose errors a contrast of up to
         // 6 between neighbouring cells amplifies; on both sides: 2 (20 + 6 * 10) 2^-24 < 2^-16.
@@ -113,23 +123,35 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
         double worst = 0, widest = 0;
         for (int y = 0; y < kSize; ++y)
             for (int x = 0; x < kSize; ++x) {
-                // Pixel centre (top row first) -> world ray.
-                const double ndcX = 2.0 * (x + 0.5) / kSize - 1.0;
-                const double ndcY = 1.0 - 2.0 * (y + 0.5) / kSize;
-                const glm::dvec3 dir =
-                    orientation * glm::normalize(glm::dvec3(ndcX * tanHalf, ndcY * tanHalf, -1.0));
-                if (dir.y >= -1e-3) continue;
-                const glm::dvec3 p = eyeAt + (-eyeAt.y / dir.y) * dir;
+                // A point of the pixel (top row first; centre at 0.5, 0.5) -> its floor point.
+                const auto floorAt = [&](double px, double py) -> std::optional<glm::dvec3> {
+                    const double ndcX = 2.0 * px / kSize - 1.0;
+                    const double ndcY = 1.0 - 2.0 * py / kSize;
+                    const glm::dvec3 dir =
+                        orientation *
+                        glm::normalize(glm::dvec3(ndcX * tanHalf, ndcY * tanHalf, -1.0));
+                    if (dir.y >= -1e-3) return std::nullopt;
+                    return eyeAt + (-eyeAt.y / dir.y) * dir;
+                };
+                const std::optional<glm::dvec3> centre = floorAt(x + 0.5, y + 0.5);
+                if (!centre) continue;
+                const glm::dvec3 p = *centre;
                 if (std::abs(p.x) > 0.98 || std::abs(p.z) > 0.98) continue; // away from walls
                 ++floorPixels;
                 const glm::vec3 expected = lookup(p);
                 glm::dvec3 spread(0.0);
-                for (int i = -1; i <= 1; ++i)
-                    for (int j = -1; j <= 1; ++j)
-                        spread = glm::max(
-                            spread,
-                            glm::abs(glm::dvec3(lookup(p + kEpsilon * glm::dvec3(i, 0, j))) -
-                                     glm::dvec3(expected)));
+                for (int a = -1; a <= 1; ++a)
+                    for (int b = -1; b <= 1; ++b) {
+                        const std::optional<glm::dvec3> q =
+                            floorAt(x + 0.5 + a * rayOffset, y + 0.5 + b * rayOffset);
+                        if (!q) continue;
+                        for (int i = -1; i <= 1; ++i)
+                            for (int j = -1; j <= 1; ++j)
+                                spread = glm::max(
+                                    spread, glm::abs(glm::dvec3(lookup(
+                                                         *q + kEpsilon * glm::dvec3(i, 0, j))) -
+                                                     glm::dvec3(expected)));
+                    }
                 const float* got = hdr.pixel(x, y);
                 bool ok = true, wide = false;
                 for (int c = 0; c < 3; ++c) {
