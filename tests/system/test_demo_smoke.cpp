@@ -8,11 +8,13 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <set>
 #include <string>
 
@@ -26,8 +28,12 @@ struct RunResult {
     std::string output; // stdout and stderr
 };
 
-RunResult runDemo(const std::string& arguments) {
-    const std::string command = std::string(QGI_DEMO_PATH) + " " + arguments + " 2>&1";
+/// Runs the demo with `arguments`, the variables in `unset` removed from its environment.
+RunResult runDemo(const std::string& arguments, std::initializer_list<const char*> unset = {}) {
+    std::string command = "env";
+    for (const char* name : unset)
+        command.append(" -u ").append(name);
+    command.append(" ").append(QGI_DEMO_PATH).append(" ").append(arguments).append(" 2>&1");
     RunResult result;
     FILE* pipe = popen(command.c_str(), "r");
     if (!pipe) return result;
@@ -101,16 +107,16 @@ TEST(DemoSmoke, HeadlessCornellWritesEveryRequestedFile) {
 TEST(DemoSmoke, HelpExitsZeroAndListsTheOptions) {
     const RunResult run = runDemo("--help");
     EXPECT_EQ(run.exitCode, 0);
-    for (const char* option : {"--scene", "--headless", "--frames", "--width", "--height",
-                               "--camera-path", "--screenshot", "--profile", "--seed",
-                               "--export-scene"})
+    for (const char* option :
+         {"--scene", "--headless", "--frames", "--width", "--height", "--camera-path",
+          "--screenshot", "--profile", "--seed", "--export-scene", "--context", "--gl-debug"})
         EXPECT_NE(run.output.find(option), std::string::npos) << option;
 }
 
 TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
-    for (const char* args :
-         {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag", "--photons abc",
-          "--width 1280.5", "--seed -1", "--dt nan", "--exposure inf", "--vlf-lines 12"}) {
+    for (const char* args : {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag",
+                             "--photons abc", "--width 1280.5", "--seed -1", "--dt nan",
+                             "--exposure inf", "--vlf-lines 12", "--context sideways"}) {
         const RunResult run = runDemo(std::string(args) + " --headless");
         EXPECT_EQ(run.exitCode, 2) << args << ": " << run.output;
         EXPECT_NE(run.output.find("error"), std::string::npos) << args;
@@ -201,6 +207,26 @@ TEST(DemoSmoke, MissingSceneFileIsNamedInTheError) {
     const RunResult run = runDemo("--headless --frames 1 --scene /nonexistent/level.gltf");
     EXPECT_EQ(run.exitCode, 1) << run.output;
     EXPECT_NE(run.output.find("/nonexistent/level.gltf"), std::string::npos) << run.output;
+}
+
+// --context egl needs no window system: with the display variables unset it still renders
+// (headless, implied) and writes its outputs; the image equals the window's where both reach
+// the same driver (GlPlatform.EglPbufferDrawsTheWindowsFrame).
+TEST(DemoSmoke, EglContextRendersWithoutADisplay) {
+    const fs::path dir = scratchDir();
+    const std::string base = (dir / "egl").string();
+    fs::remove(base + ".png");
+    const RunResult run = runDemo("--context egl --scene cornell --frames 2 --width 64 "
+                                  "--height 48 --photons 1000 --screenshot " +
+                                      base,
+                                  {"DISPLAY", "WAYLAND_DISPLAY"});
+    ASSERT_EQ(run.exitCode, 0) << run.output;
+    EXPECT_NE(run.output.find("(EGL)"), std::string::npos) << run.output;
+    const Image8 png = readPng(base + ".png");
+    EXPECT_EQ(png.width, 64);
+    EXPECT_EQ(png.height, 48);
+    EXPECT_TRUE(std::any_of(png.rgba.begin(), png.rgba.end(), [](std::uint8_t v) { return v > 0; }))
+        << "a black frame";
 }
 
 TEST(DemoSmoke, SameSeedSameImage) {
