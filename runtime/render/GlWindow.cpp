@@ -297,9 +297,16 @@ int GlWindow::height() const {
 }
 
 bool GlWindow::currentFramebufferSize(int& width, int& height) {
-    if (!tCurrent) return false;
-    width = tCurrent->width();
-    height = tCurrent->height();
+    if (tCurrent) {
+        width = tCurrent->width();
+        height = tCurrent->height();
+        return true;
+    }
+    // A GLFW window of the engine's own. (Without glfwInit this reports GLFW_NOT_INITIALIZED
+    // to an error callback nobody set, and finds none.)
+    GLFWwindow* window = glfwGetCurrentContext();
+    if (!window) return false;
+    glfwGetFramebufferSize(window, &width, &height);
     return true;
 }
 

@@ -46,8 +46,8 @@ public:
     int width() const;  ///< framebuffer width, pixels
     int height() const; ///< framebuffer height, pixels
 
-    /** The default framebuffer's size of the GlWindow current on this thread; false when none
-     *  is current.                                                                          */
+    /** The default framebuffer's size of the GlWindow current on this thread, else of the
+     *  current GLFW window (an engine's own); false when there is neither.                  */
     static bool currentFramebufferSize(int& width, int& height);
 
 private:

@@ -17,7 +17,8 @@ class FrameProfiler;
 /** Draws a RenderScene: shadow maps (hybrid mode), the scene into an RGBA32F target of
  *  radiance in W/(m^2 sr), then exposure and the filmic tonemap (shaders/tonemap.frag) into an
  *  sRGB-encoded RGBA8 target, which is blitted to the default framebuffer of the GlWindow
- *  current on this thread (a window or an EGL pbuffer; with none, the image stays in its target).
+ *  current on this thread (a window or an EGL pbuffer) or of the current GLFW window (with
+ *  neither, the image stays in its target).
  *  Every pass sets its full GL state (PipelineState); passes are timed as "render/shadow",
  *  "render/scene" and "render/tonemap". Needs a current GL 4.5 context for its whole life.
  *  Lights past shader::kMaxLights are ignored (logged once).                              */
