@@ -5,6 +5,7 @@
 #include "systems/photon_update/PhotonSampling.h"
 
 #include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
 #include <limits>
@@ -13,10 +14,18 @@ namespace qgi {
 namespace {
 
 // Paths per block: enough live rays for full 8-wide packets over several bounces; a round of
-// blocks is traced in parallel, then appended in order (deterministic layout).
+// blocks is traced in parallel, then appended in order (deterministic layout). A round holds
+// at least kBlocksPerThread blocks per worker, so that the blocks' uneven lengths even out
+// before the round's end waits for the last of them.
 constexpr std::size_t kMaxBlockPaths = 256;
 constexpr std::size_t kMinBlockPaths = 32;
-constexpr std::size_t kBlocksPerRound = 32;
+constexpr std::size_t kMinBlocksPerRound = 32;
+constexpr std::size_t kBlocksPerThread = 16;
+
+std::size_t blocksPerRound() {
+    return std::max(kMinBlocksPerRound,
+                    kBlocksPerThread * std::size_t(tbb::this_task_arena::max_concurrency()));
+}
 
 /// Continues photon `h` after `hit`: Russian roulette, then the reflected ray. False when the
 /// path ends here.
@@ -114,13 +123,13 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
                          const HeadFn& head, PhotonSegments& out,
                          std::vector<std::uint32_t>& ends) {
     // Small jobs (a frame's re-traced paths) still split into a few blocks per thread.
-    const std::size_t blockPaths =
-        std::clamp(count / kBlocksPerRound, kMinBlockPaths, kMaxBlockPaths);
+    const std::size_t roundBlocks = blocksPerRound();
+    const std::size_t blockPaths = std::clamp(count / roundBlocks, kMinBlockPaths, kMaxBlockPaths);
     QGI_ASSERT(!ends.empty() && ends.back() == out.size(), "ends must end with out.size()");
-    if (mBlocks.size() < kBlocksPerRound) mBlocks.resize(kBlocksPerRound);
+    if (mBlocks.size() < roundBlocks) mBlocks.resize(roundBlocks);
     ends.reserve(ends.size() + count);
-    for (std::size_t round = 0; round < count; round += blockPaths * kBlocksPerRound) {
-        const std::size_t roundEnd = std::min(count, round + blockPaths * kBlocksPerRound);
+    for (std::size_t round = 0; round < count; round += blockPaths * roundBlocks) {
+        const std::size_t roundEnd = std::min(count, round + blockPaths * roundBlocks);
         const std::size_t blocks = (roundEnd - round + blockPaths - 1) / blockPaths;
         tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
             const std::size_t begin = round + b * blockPaths;

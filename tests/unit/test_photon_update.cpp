@@ -20,6 +20,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <oneapi/tbb/task_arena.h>
 
 #include <glm/gtc/constants.hpp>
 #include <glm/gtc/quaternion.hpp>
@@ -217,6 +218,31 @@ TEST(PhotonUpdate, SameSeedGivesABitIdenticalStoreAnotherSeedDoesNot) {
     for (std::size_t s = 0; s < x.segments.size(); ++s)
         ASSERT_TRUE(sameSegment(x.segments, s, y.segments, s));
     EXPECT_FALSE(sameStore(x, z));
+}
+
+// The tracer splits its rounds into more blocks the more threads it has: the store, layout
+// included, must not show it. One thread, the default, and 16 threads (oversubscribed here).
+TEST(PhotonUpdate, TheStoreDoesNotDependOnTheThreadCount) {
+    const auto shoot = [](Registry& r, int threads) {
+        tbb::task_arena arena(threads);
+        arena.execute([&] {
+            buildRoom(r, kCubeRest, kCrateRest);
+            buildRayScene(r);
+            PhotonUpdateSystem system(settingsWith(20'000));
+            firstUpdate(r, system);
+        });
+        return &storeOf(r);
+    };
+    Registry a, b, c;
+    const PhotonStore& one = *shoot(a, 1);
+    const PhotonStore& all = *shoot(b, tbb::task_arena::automatic);
+    const PhotonStore& sixteen = *shoot(c, 16);
+    for (const PhotonStore* other : {&all, &sixteen}) {
+        EXPECT_TRUE(sameStore(one, *other));
+        ASSERT_EQ(one.segments.size(), other->segments.size());
+        for (std::size_t s = 0; s < one.segments.size(); ++s)
+            ASSERT_TRUE(sameSegment(one.segments, s, other->segments, s)) << "segment " << s;
+    }
 }
 
 TEST(PhotonUpdate, RetracingFromAnyStoredSegmentReproducesTheRestOfThePath) {
