@@ -35,7 +35,11 @@ namespace {
 constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); // PhotonPath::light
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
-constexpr std::size_t kIdleChangedRatio = 64; // the grid refreshes past 1/64 changed paths
+// The grid refreshes when more paths are changed than 1/64 of all, or than twice the paths
+// re-traced this frame, whichever is more: scanning that many boxes per query costs far less
+// than the frame's re-tracing, and a big mobile re-traces much the same paths every frame.
+constexpr std::size_t kIdleChangedRatio = 64;
+constexpr std::size_t kIdleRetracedMultiple = 2;
 // How far a light's power per photon may drift from the mean before photons are shared anew
 // (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
 constexpr double kShareDrift = 4.0;
@@ -251,8 +255,9 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     // Also on still frames: the index catches up with earlier changes. While few paths are
     // changed it idles: queries scan their boxes cheaply, and paths near a moving mobile
     // would change again anyway.
-    mStats.reindexedPaths =
-        grid.refresh(store, mSettings.gridRefreshBudget, store.pathCount() / kIdleChangedRatio);
+    const std::size_t idleUpTo =
+        std::max(store.pathCount() / kIdleChangedRatio, kIdleRetracedMultiple * delta.paths.size());
+    mStats.reindexedPaths = grid.refresh(store, mSettings.gridRefreshBudget, idleUpTo);
 }
 
 /// Where the light stand-ins are (a stand-in added, removed, moved or retagged changes which
