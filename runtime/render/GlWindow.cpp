@@ -144,7 +144,7 @@ void GlWindow::openEgl(const WindowSettings& settings) {
     if (!dlopen("libEGL.so.1", RTLD_LAZY | RTLD_GLOBAL))
         fail("--context egl needs libEGL.so.1 (Debian: libegl1 and a driver such as"
              " libegl-mesa0 or the GPU vendor's)");
-    mEgl = new Egl;
+    mEgl = std::make_unique<Egl>();
     Egl& egl = *mEgl;
     try {
         egl.display = openEglDisplay();
@@ -208,17 +208,18 @@ void GlWindow::openEgl(const WindowSettings& settings) {
 void GlWindow::closeEgl() {
     if (!mEgl) return;
     if (mEgl->display != EGL_NO_DISPLAY) {
-        if (mEgl->context != EGL_NO_CONTEXT && eglGetCurrentContext() == mEgl->context)
+        // Only this window's own context is let go: another may be current by now.
+        if (mEgl->context != EGL_NO_CONTEXT && eglGetCurrentContext() == mEgl->context) {
             for (GLsync fence : mEgl->frameDone)
                 if (fence) glDeleteSync(fence);
-        eglMakeCurrent(mEgl->display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+            eglMakeCurrent(mEgl->display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+        }
         if (mEgl->context != EGL_NO_CONTEXT) eglDestroyContext(mEgl->display, mEgl->context);
         if (mEgl->surface != EGL_NO_SURFACE) eglDestroySurface(mEgl->display, mEgl->surface);
         // The display stays initialised: EGL displays are per process, and another GlWindow may
         // still hold one of its contexts.
     }
-    delete mEgl;
-    mEgl = nullptr;
+    mEgl.reset();
 }
 
 void GlWindow::checkContext(const char* platform) {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <memory>
 #include <string>
 
 struct GLFWwindow;
@@ -60,7 +61,7 @@ private:
     void checkContext(const char* platform);
 
     GLFWwindow* mWindow = nullptr;
-    Egl* mEgl = nullptr;
+    std::unique_ptr<Egl> mEgl;
 };
 
 } // namespace qgi
