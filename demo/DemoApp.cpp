@@ -39,6 +39,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -176,7 +177,13 @@ int runDemo(const DemoOptions& options) {
     windowSettings.width = options.width;
     windowSettings.height = options.height;
     windowSettings.headless = options.headless;
-    windowSettings.platform = options.context == "egl" ? GlPlatform::Egl : GlPlatform::Window;
+    const bool display = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
+    const bool egl =
+        options.context == "egl" || (options.context == "auto" && options.headless && !display);
+    if (egl && options.context == "auto")
+        logInfo("no display: rendering headless through EGL (--context window needs an X "
+                "server such as Xvfb)");
+    windowSettings.platform = egl ? GlPlatform::Egl : GlPlatform::Window;
     windowSettings.debugContext = windowSettings.debugContext || options.glDebug;
     windowSettings.title = "qgi - " + options.scene;
     GlWindow window(windowSettings);

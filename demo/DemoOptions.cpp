@@ -83,9 +83,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                  "Render offscreen (hidden window), follow the scripted camera path with a fixed time step");
     app.add_option("--context", o.context,
                    "Where the OpenGL context comes from: window (a GLFW window; headless runs "
-                   "need an X server such as Xvfb) or egl (an offscreen pbuffer on the first GPU "
-                   "through EGL, for machines without X; implies --headless)")
-        ->check(CLI::IsMember({"window", "egl"}));
+                   "need an X server such as Xvfb), egl (an offscreen pbuffer on the first GPU "
+                   "through EGL, for machines without X; implies --headless), or auto (egl for "
+                   "a headless run without a display, else window)")
+        ->check(CLI::IsMember({"auto", "window", "egl"}));
     app.add_flag("--gl-debug", o.glDebug,
                  "OpenGL debug context: the driver's errors and warnings go to the log (on in "
                  "debug builds)");

@@ -11,7 +11,9 @@ struct DemoOptions {
     std::string scene = "atrium"; ///< built-in name or .gltf/.glb path
     bool headless = false;        ///< hidden window, scripted camera, fixed time step
     bool glDebug = false;         ///< GL debug context: the driver's messages go to the log
-    std::string context = "window"; ///< "window" (GLFW) or "egl" (pbuffer, no X; implies headless)
+    /// "window" (GLFW), "egl" (pbuffer, no X; implies headless) or "auto" (egl when headless
+    /// without a display, else window)
+    std::string context = "auto";
     int frames = 0;               ///< frames to run; 0: until the window closes (headless: 240)
     int width = 1280;
     int height = 720;

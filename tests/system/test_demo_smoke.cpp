@@ -210,23 +210,28 @@ TEST(DemoSmoke, MissingSceneFileIsNamedInTheError) {
 }
 
 // --context egl needs no window system: with the display variables unset it still renders
-// (headless, implied) and writes its outputs; the image equals the window's where both reach
-// the same driver (GlPlatform.EglPbufferDrawsTheWindowsFrame).
+// (headless, implied) and writes its outputs, and so does a plain headless run, which picks
+// EGL itself there. The image equals the window's where both reach the same driver
+// (GlPlatform.EglPbufferDrawsTheWindowsFrame).
 TEST(DemoSmoke, EglContextRendersWithoutADisplay) {
     const fs::path dir = scratchDir();
-    const std::string base = (dir / "egl").string();
-    fs::remove(base + ".png");
-    const RunResult run = runDemo("--context egl --scene cornell --frames 2 --width 64 "
-                                  "--height 48 --photons 1000 --screenshot " +
-                                      base,
-                                  {"DISPLAY", "WAYLAND_DISPLAY"});
-    ASSERT_EQ(run.exitCode, 0) << run.output;
-    EXPECT_NE(run.output.find("(EGL)"), std::string::npos) << run.output;
-    const Image8 png = readPng(base + ".png");
-    EXPECT_EQ(png.width, 64);
-    EXPECT_EQ(png.height, 48);
-    EXPECT_TRUE(std::any_of(png.rgba.begin(), png.rgba.end(), [](std::uint8_t v) { return v > 0; }))
-        << "a black frame";
+    for (const char* context : {"--context egl", "--headless"}) {
+        const std::string base = (dir / "egl").string();
+        fs::remove(base + ".png");
+        const RunResult run = runDemo(std::string(context) +
+                                          " --scene cornell --frames 2 --width 64 --height 48 "
+                                          "--photons 1000 --screenshot " +
+                                          base,
+                                      {"DISPLAY", "WAYLAND_DISPLAY"});
+        ASSERT_EQ(run.exitCode, 0) << context << ": " << run.output;
+        EXPECT_NE(run.output.find("(EGL)"), std::string::npos) << context << ": " << run.output;
+        const Image8 png = readPng(base + ".png");
+        EXPECT_EQ(png.width, 64);
+        EXPECT_EQ(png.height, 48);
+        EXPECT_TRUE(
+            std::any_of(png.rgba.begin(), png.rgba.end(), [](std::uint8_t v) { return v > 0; }))
+            << context << ": a black frame";
+    }
 }
 
 TEST(DemoSmoke, SameSeedSameImage) {
