@@ -113,9 +113,8 @@ GlWindow::GlWindow(const WindowSettings& settings) {
 void GlWindow::openWindow(const WindowSettings& settings) {
     if (gLiveWindows == 0 && !glfwInit())
         fail("cannot start GLFW: ", glfwErrorText(),
-             " (without a display, run headless under Xvfb: 'xvfb-run -a qgi-demo --headless ...',"
-             " or use scripts/demo, which does that; on a GPU machine without X, use"
-             " '--context egl')");
+             " (without a display, render headless: 'qgi-demo --headless ...' does so through"
+             " EGL, 'xvfb-run -a qgi-demo --headless ...' and scripts/demo under Xvfb)");
     ++gLiveWindows;
 
     glfwDefaultWindowHints();
