@@ -141,7 +141,7 @@ void GlWindow::openWindow(const WindowSettings& settings) {
 void GlWindow::openEgl(const WindowSettings& settings) {
     // libepoxy aborts the process when it cannot load libEGL: look for it first.
     if (!dlopen("libEGL.so.1", RTLD_LAZY | RTLD_GLOBAL))
-        fail("--context egl needs libEGL.so.1 (Debian: libegl1 and a driver such as"
+        fail("an EGL context needs libEGL.so.1 (Debian: libegl1 and a driver such as"
              " libegl-mesa0 or the GPU vendor's)");
     mEgl = std::make_unique<Egl>();
     Egl& egl = *mEgl;
