@@ -1,7 +1,8 @@
 // GL test of the VLF lookup in the scene shader (runs under `xvfb-run -a`): a room whose floor
 // is a mirror and whose walls emit, seen from above; every floor pixel must show what the CPU
 // lookup (Vlf::specularRadiance, tested against closed forms in test_vlf_bake) gives for the
-// same point and view direction, within what float rounding of that point can change.
+// same point and view direction, within what the rasterizer's vertex snapping and float
+// rounding of that point can change.
 #include "GlTestWindow.h"
 #include "components/Camera.h"
 #include "components/Material.h"
