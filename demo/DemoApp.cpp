@@ -39,7 +39,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -177,9 +176,8 @@ int runDemo(const DemoOptions& options) {
     windowSettings.width = options.width;
     windowSettings.height = options.height;
     windowSettings.headless = options.headless;
-    const bool display = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
-    const bool egl =
-        options.context == "egl" || (options.context == "auto" && options.headless && !display);
+    const bool egl = options.context == "egl" || (options.context == "auto" && options.headless &&
+                                                  !GlWindow::displayAvailable());
     if (egl && options.context == "auto")
         logInfo("no display: rendering headless through EGL (--context window needs an X "
                 "server such as Xvfb)");

@@ -10,6 +10,7 @@
 #include <dlfcn.h>
 
 #include <array>
+#include <cstdlib>
 #include <cstring>
 #include <vector>
 
@@ -294,6 +295,10 @@ int GlWindow::height() const {
     int w = 0, h = 0;
     glfwGetFramebufferSize(mWindow, &w, &h);
     return h;
+}
+
+bool GlWindow::displayAvailable() {
+    return std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
 }
 
 bool GlWindow::currentFramebufferSize(int& width, int& height) {

@@ -51,6 +51,10 @@ public:
      *  current GLFW window (an engine's own); false when there is neither.                  */
     static bool currentFramebufferSize(int& width, int& height);
 
+    /// Whether a window system is there to open windows on (DISPLAY or WAYLAND_DISPLAY set);
+    /// without one only GlPlatform::Egl makes a context.
+    static bool displayAvailable();
+
 private:
     struct Egl; // EGL handles, kept out of this header
     void openWindow(const WindowSettings& settings);

@@ -18,7 +18,7 @@ inline bool eglRequested() {
 
 /// Why no GL test can run here, or "" when one can.
 inline std::string missingGlPlatform() {
-    if (eglRequested() || std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY")) return {};
+    if (eglRequested() || GlWindow::displayAvailable()) return {};
     return "no display: run the GL tests under 'xvfb-run -a' (or with QGI_GL_CONTEXT=egl)";
 }
 

@@ -31,7 +31,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -118,6 +117,15 @@ void buildCornell(Registry& registry) {
     ASSERT_EQ(emitters, 1u);
 }
 
+/// The renderer as the tests draw the box: kWidth x kHeight, hybrid mode, defaults otherwise.
+RenderSettings hybridSettings() {
+    RenderSettings settings;
+    settings.width = kWidth;
+    settings.height = kHeight;
+    settings.mode = ShadingMode::Hybrid;
+    return settings;
+}
+
 /// Emitted radiance of the luminaire, W/(m^2 sr).
 glm::vec3 luminaireEmission(const Registry& registry) {
     glm::vec3 emission(0.f);
@@ -162,10 +170,7 @@ protected:
 
 TEST_F(BuiltinCornellTest, DirectLightMatchesCpuReference) {
     ASSERT_NO_FATAL_FAILURE(buildCornell(mWorld));
-    RenderSettings settings;
-    settings.width = kWidth;
-    settings.height = kHeight;
-    settings.mode = ShadingMode::Hybrid;
+    const RenderSettings settings = hybridSettings();
     RenderSystem renderer(settings);
     renderer.update(mWorld, FrameContext{}); // frame 0, time 0: the poses the scene was built in
     const ImageF actual = renderer.readHdr();
@@ -239,11 +244,7 @@ PlatformFrame drawCornell(GlPlatform platform) {
     frame.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
     Registry world; // its GPU resources go before the context does
     buildCornell(world);
-    RenderSettings settings;
-    settings.width = kWidth;
-    settings.height = kHeight;
-    settings.mode = ShadingMode::Hybrid;
-    RenderSystem renderer(settings);
+    RenderSystem renderer(hybridSettings());
     renderer.update(world, FrameContext{});
     frame.hdr = renderer.readHdr();
     frame.ldr = renderer.readLdr();
@@ -266,7 +267,7 @@ PlatformFrame drawCornell(GlPlatform platform) {
 // reach the same driver (here Mesa's llvmpipe through GLX and through EGL's device platform),
 // and the renderer presents into the pbuffer as into the window.
 TEST(GlPlatform, EglPbufferDrawsTheWindowsFrame) {
-    if (!std::getenv("DISPLAY") && !std::getenv("WAYLAND_DISPLAY"))
+    if (!GlWindow::displayAvailable())
         GTEST_SKIP() << "no display for the window to compare with: run under 'xvfb-run -a'";
     const PlatformFrame window = drawCornell(GlPlatform::Window);
     const PlatformFrame egl = drawCornell(GlPlatform::Egl);
