@@ -703,16 +703,18 @@ void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, Phot
                           }
                       });
 
-    const PhotonSegments& segments = store.segments;
+    // A re-traced suffix starts with the ray its old one did: the first old segment, just
+    // copied next to the others (read from the store, it would be a cache miss per path).
+    const PhotonSegments& before = delta.oldSegments;
     mTracer.trace(
         scene, surfaces(), n,
         [&](std::size_t i) {
             const Job& job = mJobs[i];
-            const PhotonPath& path = store.paths[job.path];
-            if (job.emit) return emitPhoton(mEmitters[path.light], job.path, mSettings.seed);
-            const std::size_t s = std::size_t(path.first) + job.k;
-            return PhotonHead{segments.origin[s], segments.direction[s], segments.power[s],
-                              job.path, segments.bounce[s]};
+            if (job.emit)
+                return emitPhoton(mEmitters[store.paths[job.path].light], job.path, mSettings.seed);
+            const std::size_t s = delta.oldFirst[i];
+            return PhotonHead{before.origin[s], before.direction[s], before.power[s], job.path,
+                              before.bounce[s]};
         },
         delta.newSegments, delta.newFirst);
     mStats.tracedSegments = delta.newSegments.size();
