@@ -31,6 +31,12 @@ constexpr float kRectangleOverlap = 0.05f;
 /// The two triangles of a rectangle are this fraction larger than its halves (see
 /// splitIntoPlanes), so that they overlap across its diagonal.
 constexpr float kDiagonalOverlap = 0.02f;
+/// A plane's lookup skips discs whose centre lies farther than this many radii from the
+/// crossing point in the plane: the distance the 3 x 3 cells around it guarantee, so the
+/// quarter radius the lookup has to spare for rounding stays (see the class comment).
+constexpr double kLookupReach = 1.25;
+/// Tilted discs are grouped by their unit normal rounded to this step.
+constexpr double kNormalQuantum = 1.0 / 1024.0;
 /// A plane becomes a patch only while its grid has at most this many cells per disc (plus
 /// kGridCellsSpare): discs strewn thinly over a large plane stay points.
 constexpr std::size_t kGridCellsPerDisc = 64;
@@ -81,169 +87,189 @@ struct DiscIndex::QueryContext {
     std::vector<std::uint64_t>* pairs = nullptr; // the chunk's output
 };
 
-struct DiscIndex::Layout {
-    std::vector<std::uint32_t> pointIds;
-    std::vector<Plane> planes;
-    std::vector<std::uint32_t> cellStart{0};
-    std::vector<std::uint32_t> cellDiscs;
-    std::vector<glm::vec3> cellCenters;
-    std::vector<Rectangle> rectangles;
-    std::vector<glm::vec4> patchVertices;
-    std::vector<glm::uvec3> patchTriangles;
-};
-
-DiscIndex::DiscIndex(EmbreeDevice& device, Motion motion) : mDevice(device), mMotion(motion) {}
-
-void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
-                                std::span<const glm::vec3> normals, float radius, Layout& out) {
-    // Group the discs of exactly axis-aligned normal by (normal, coordinate along the axis),
-    // bit for bit; the sort keeps the groups, and the discs in them, in a fixed order.
+struct DiscIndex::Scratch {
     struct Keyed {
-        std::array<std::uint32_t, 4> key; // normal's bits, coordinate's bits
+        std::array<std::uint32_t, 4> key; // exact: normal's bits, coordinate's bits
         std::uint32_t disc;
         bool operator<(const Keyed& o) const {
             return std::tie(key, disc) < std::tie(o.key, o.disc);
         }
     };
+    struct Offset {
+        double offset;
+        std::uint32_t disc;
+        bool operator<(const Offset& o) const {
+            return std::tie(offset, disc) < std::tie(o.offset, o.disc);
+        }
+    };
+    struct Run {
+        std::uint32_t first, last, rectangle;
+    };
+    /// A group of tilted discs with one quantised normal: keyed[first, end).
+    struct Group {
+        std::size_t first, end;
+    };
     std::vector<Keyed> keyed;
-    std::vector<std::uint8_t> planar(centers.size(), 0);
-    for (std::uint32_t i = 0; i < centers.size(); ++i) {
-        const int axis = exactAxis(normals[i]);
-        if (axis < 0) continue;
-        // + 0.f: a negative zero joins the positive one (the rule gives the same answers).
-        keyed.push_back({{bitsOf(normals[i].x + 0.f), bitsOf(normals[i].y + 0.f),
-                          bitsOf(normals[i].z + 0.f), bitsOf(centers[i][axis] + 0.f)},
-                         i});
-    }
-    std::sort(keyed.begin(), keyed.end());
-
-    const float cell = kPlaneCellRadii * radius;
-    const float overlap = kRectangleOverlap * cell;
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> cellOf; // (cell, disc)
+    std::vector<Group> groups;
+    std::vector<Offset> offsets;
+    std::vector<std::uint8_t> planar;
+    std::vector<std::uint32_t> discs;
+    std::vector<glm::dvec2> uv;
+    std::vector<float> values;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> cellOf; // (cell, position in discs)
     std::vector<std::uint8_t> active;
-    for (std::size_t first = 0; first < keyed.size();) {
-        std::size_t last = first;
-        while (last < keyed.size() && keyed[last].key == keyed[first].key)
-            ++last;
-        const std::span<const Keyed> group(keyed.data() + first, last - first);
-        first = last;
-        if (group.size() < kMinPlaneDiscs) continue;
+    std::vector<Run> above, here;
+};
 
-        Plane plane;
-        const glm::vec3 normal = normals[group[0].disc];
-        plane.axis = std::uint8_t(exactAxis(normal));
-        plane.u = std::uint8_t((plane.axis + 1) % 3);
-        plane.v = std::uint8_t((plane.axis + 2) % 3);
-        plane.normal = normal;
-        plane.coordinate = centers[group[0].disc][plane.axis];
-        glm::vec2 lo(std::numeric_limits<float>::max()), hi(std::numeric_limits<float>::lowest());
-        for (const Keyed& k : group) {
-            const glm::vec2 uv(centers[k.disc][plane.u], centers[k.disc][plane.v]);
-            lo = glm::min(lo, uv);
-            hi = glm::max(hi, uv);
-        }
-        // One empty cell all around: the 3 x 3 neighbourhood of a disc's cell is in the grid.
-        const double columns = std::floor(double(hi.x - lo.x) / cell) + 3.0;
-        const double rows = std::floor(double(hi.y - lo.y) / cell) + 3.0;
-        if (!(columns * rows <= double(kGridCellsPerDisc * group.size() + kGridCellsSpare)) ||
-            columns > kMaxGridSide || rows > kMaxGridSide ||
-            double(out.cellStart.size()) + columns * rows > kMaxCells)
-            continue;
-        plane.columns = std::uint32_t(columns);
-        plane.rows = std::uint32_t(rows);
-        plane.corner = lo - glm::vec2(cell);
-        plane.firstCell = std::uint32_t(out.cellStart.size() - 1);
+void DiscIndex::Layout::clear() {
+    pointIds.clear();
+    pointDiscs.clear();
+    pointNormals.clear();
+    planes.clear();
+    cellStart.assign(1, 0);
+    cellDiscs.clear();
+    cellCenters.clear();
+    cellNormals.clear();
+    cellPoints.clear();
+    rectangles.clear();
+    patchVertices.clear();
+    patchTriangles.clear();
+    direct = false;
+}
 
-        const auto cellIndex = [&](const glm::vec3& c) {
-            const auto column = std::uint32_t(std::clamp(
-                std::floor((c[plane.u] - plane.corner.x) / cell), 1.f, float(plane.columns - 2)));
-            const auto row = std::uint32_t(std::clamp(
-                std::floor((c[plane.v] - plane.corner.y) / cell), 1.f, float(plane.rows - 2)));
-            return row * plane.columns + column;
-        };
-        cellOf.clear();
-        for (const Keyed& k : group)
-            cellOf.emplace_back(cellIndex(centers[k.disc]), k.disc);
-        std::sort(cellOf.begin(), cellOf.end());
-        const std::size_t cells = std::size_t(plane.columns) * plane.rows;
-        std::size_t next = 0;
-        active.assign(cells, 0);
-        for (std::uint32_t c = 0; c < cells; ++c) {
-            for (; next < cellOf.size() && cellOf[next].first == c; ++next) {
-                out.cellDiscs.push_back(cellOf[next].second);
-                out.cellCenters.push_back(centers[cellOf[next].second]);
-                planar[cellOf[next].second] = 1;
-            }
-            out.cellStart.push_back(std::uint32_t(out.cellDiscs.size()));
-        }
-        // Cells within one of a non-empty cell: wherever a segment can cross within a radius
-        // of one of the plane's discs.
-        for (std::uint32_t row = 1; row + 1 < plane.rows; ++row)
-            for (std::uint32_t column = 1; column + 1 < plane.columns; ++column) {
-                const std::size_t c = std::size_t(row) * plane.columns + column;
-                if (out.cellStart[plane.firstCell + c] == out.cellStart[plane.firstCell + c + 1])
-                    continue;
-                for (std::uint32_t r = row - 1; r <= row + 1; ++r)
-                    for (std::uint32_t q = column - 1; q <= column + 1; ++q)
-                        active[std::size_t(r) * plane.columns + q] = 1;
-            }
-        // Rectangles: runs of active cells along each row, merged with the run of the same
-        // columns in the row below.
-        struct Run {
-            std::uint32_t first, last, rectangle;
-        };
-        std::vector<Run> above, here;
-        const auto planeIndex = std::uint32_t(out.planes.size());
-        for (std::uint32_t row = 0; row < plane.rows; ++row) {
-            here.clear();
-            for (std::uint32_t column = 0; column < plane.columns;) {
-                if (!active[std::size_t(row) * plane.columns + column]) {
-                    ++column;
-                    continue;
-                }
-                Run run{column, column, 0};
-                while (run.last + 1 < plane.columns &&
-                       active[std::size_t(row) * plane.columns + run.last + 1])
-                    ++run.last;
-                column = run.last + 1;
-                const float v1 = plane.corner.y + float(row + 1) * cell + overlap;
-                const auto same = std::find_if(above.begin(), above.end(), [&](const Run& a) {
-                    return a.first == run.first && a.last == run.last;
-                });
-                if (same != above.end()) { // extend the rectangle one row down
-                    run.rectangle = same->rectangle;
-                    out.rectangles[run.rectangle].hi.y = v1;
-                } else {
-                    run.rectangle = std::uint32_t(out.rectangles.size());
-                    out.rectangles.push_back(
-                        {planeIndex,
-                         {plane.corner.x + float(run.first) * cell - overlap,
-                          plane.corner.y + float(row) * cell - overlap},
-                         {plane.corner.x + float(run.last + 1) * cell + overlap, v1}});
-                }
-                here.push_back(run);
-            }
-            std::swap(above, here);
-        }
-        out.planes.push_back(plane);
+DiscIndex::DiscIndex(EmbreeDevice& device, Motion motion)
+    : mDevice(device), mMotion(motion), mScratch(std::make_unique<Scratch>()) {}
+
+DiscIndex::~DiscIndex() = default;
+
+std::size_t DiscIndex::tiltedPlaneCount() const {
+    return std::size_t(std::count_if(mLayout.planes.begin(), mLayout.planes.end(),
+                                     [](const Plane& p) { return p.tilted; }));
+}
+
+glm::dvec2 DiscIndex::planeCoordinates(const Plane& plane, const glm::dvec3& x) {
+    if (plane.tilted) return {glm::dot(x, plane.uAxis), glm::dot(x, plane.vAxis)};
+    return {x[plane.u], x[plane.v]};
+}
+
+bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
+                         std::span<const glm::dvec2> uv, std::span<const glm::vec3> centers,
+                         std::span<const glm::vec3> normals, float radius, Layout& out,
+                         Scratch& scratch) {
+    const double cell = double(kPlaneCellRadii) * radius;
+    const double overlap = double(kRectangleOverlap) * cell;
+    glm::dvec2 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
+    for (const glm::dvec2& p : uv) {
+        lo = glm::min(lo, p);
+        hi = glm::max(hi, p);
     }
-    for (std::uint32_t i = 0; i < centers.size(); ++i)
-        if (!planar[i]) out.pointIds.push_back(i);
+    // One empty cell all around: the 3 x 3 neighbourhood of a disc's cell is in the grid.
+    const double columns = std::floor((hi.x - lo.x) / cell) + 3.0;
+    const double rows = std::floor((hi.y - lo.y) / cell) + 3.0;
+    if (!(columns * rows <= double(kGridCellsPerDisc * discs.size() + kGridCellsSpare)) ||
+        columns > kMaxGridSide || rows > kMaxGridSide ||
+        double(out.cellStart.size()) + columns * rows > kMaxCells)
+        return false;
+    plane.columns = std::uint32_t(columns);
+    plane.rows = std::uint32_t(rows);
+    plane.corner = lo - glm::dvec2(cell);
+    // kLookupReach radii, and the rounding of the discs' float coordinates in the grid.
+    const double extent = std::max(hi.x - lo.x, hi.y - lo.y) + 2.0 * cell;
+    plane.reach2 = float(std::pow(kLookupReach * radius + std::ldexp(extent, -20), 2.0));
+    plane.firstCell = std::uint32_t(out.cellStart.size() - 1);
+
+    auto& cellOf = scratch.cellOf;
+    cellOf.clear();
+    for (std::uint32_t i = 0; i < discs.size(); ++i) {
+        const auto column = std::uint32_t(std::clamp(std::floor((uv[i].x - plane.corner.x) / cell),
+                                                     1.0, double(plane.columns - 2)));
+        const auto row = std::uint32_t(
+            std::clamp(std::floor((uv[i].y - plane.corner.y) / cell), 1.0, double(plane.rows - 2)));
+        cellOf.emplace_back(row * plane.columns + column, i);
+    }
+    std::sort(cellOf.begin(), cellOf.end()); // by cell, then by disc within it
+    const std::size_t cells = plane.cellCount();
+    std::size_t next = 0;
+    auto& active = scratch.active;
+    active.assign(cells, 0);
+    for (std::uint32_t c = 0; c < cells; ++c) {
+        for (; next < cellOf.size() && cellOf[next].first == c; ++next) {
+            const std::uint32_t disc = discs[cellOf[next].second];
+            out.cellDiscs.push_back(disc);
+            out.cellCenters.push_back(centers[disc]);
+            out.cellNormals.push_back(normals[disc]);
+            out.cellPoints.push_back(glm::vec2(uv[cellOf[next].second] - plane.corner));
+        }
+        out.cellStart.push_back(std::uint32_t(out.cellDiscs.size()));
+    }
+    // Cells within one of a non-empty cell: wherever a segment can cross within a radius of
+    // one of the plane's discs.
+    for (std::uint32_t row = 1; row + 1 < plane.rows; ++row)
+        for (std::uint32_t column = 1; column + 1 < plane.columns; ++column) {
+            const std::size_t c = std::size_t(row) * plane.columns + column;
+            if (out.cellStart[plane.firstCell + c] == out.cellStart[plane.firstCell + c + 1])
+                continue;
+            for (std::uint32_t r = row - 1; r <= row + 1; ++r)
+                for (std::uint32_t q = column - 1; q <= column + 1; ++q)
+                    active[std::size_t(r) * plane.columns + q] = 1;
+        }
+    // Rectangles: runs of active cells along each row, merged with the run of the same
+    // columns in the row below.
+    auto& above = scratch.above;
+    auto& here = scratch.here;
+    above.clear();
+    const auto planeIndex = std::uint32_t(out.planes.size());
+    const std::size_t firstRectangle = out.rectangles.size();
+    for (std::uint32_t row = 0; row < plane.rows; ++row) {
+        here.clear();
+        for (std::uint32_t column = 0; column < plane.columns;) {
+            if (!active[std::size_t(row) * plane.columns + column]) {
+                ++column;
+                continue;
+            }
+            Scratch::Run run{column, column, 0};
+            while (run.last + 1 < plane.columns &&
+                   active[std::size_t(row) * plane.columns + run.last + 1])
+                ++run.last;
+            column = run.last + 1;
+            const double v1 = plane.corner.y + double(row + 1) * cell + overlap;
+            const auto same = std::find_if(above.begin(), above.end(), [&](const Scratch::Run& a) {
+                return a.first == run.first && a.last == run.last;
+            });
+            if (same != above.end()) { // extend the rectangle one row down
+                run.rectangle = same->rectangle;
+                out.rectangles[run.rectangle].hi.y = v1;
+            } else {
+                run.rectangle = std::uint32_t(out.rectangles.size());
+                out.rectangles.push_back(
+                    {planeIndex,
+                     {plane.corner.x + double(run.first) * cell - overlap,
+                      plane.corner.y + double(row) * cell - overlap},
+                     {plane.corner.x + double(run.last + 1) * cell + overlap, v1}});
+            }
+            here.push_back(run);
+        }
+        std::swap(above, here);
+    }
 
     // Each rectangle as two right triangles, each stretched about its right-angle corner so
     // that they overlap across the diagonal: a crossing on the diagonal meets at least one of
     // them whatever Embree's rounding (its triangle test is not watertight). Triangle 2i and
     // 2i + 1 are rectangle i's.
-    for (const Rectangle& r : out.rectangles) {
-        const Plane& plane = out.planes[r.plane];
-        const auto vertex = [&](glm::vec2 uv) {
-            glm::vec4 p(0.f);
-            p[plane.axis] = plane.coordinate;
-            p[plane.u] = uv.x;
-            p[plane.v] = uv.y;
-            return p;
-        };
-        const glm::vec2 size = (r.hi - r.lo) * (1.f + kDiagonalOverlap);
+    const auto vertex = [&](glm::dvec2 p) {
+        if (plane.tilted)
+            return glm::vec4(
+                glm::vec3(plane.offset * plane.unitNormal + p.x * plane.uAxis + p.y * plane.vAxis),
+                0.f);
+        glm::vec4 q(0.f);
+        q[plane.axis] = plane.coordinate;
+        q[plane.u] = float(p.x);
+        q[plane.v] = float(p.y);
+        return q;
+    };
+    for (std::size_t i = firstRectangle; i < out.rectangles.size(); ++i) {
+        const Rectangle& r = out.rectangles[i];
+        const glm::dvec2 size = (r.hi - r.lo) * (1.0 + double(kDiagonalOverlap));
         const auto base = std::uint32_t(out.patchVertices.size());
         // Right angle at (hi.x, lo.y), then at (lo.x, hi.y).
         out.patchVertices.push_back(vertex({r.hi.x - size.x, r.lo.y}));
@@ -255,6 +281,220 @@ void DiscIndex::splitIntoPlanes(std::span<const glm::vec3> centers,
         out.patchTriangles.emplace_back(base, base + 1, base + 2);
         out.patchTriangles.emplace_back(base + 3, base + 4, base + 5);
     }
+    out.planes.push_back(plane);
+    return true;
+}
+
+void DiscIndex::makeLayout(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
+                           float radius, Layout& out, Scratch& scratch) {
+    groupDiscs(centers, normals, radius, true, out, scratch);
+    // Tilted planes pay only where they leave Embree out; elsewhere their discs stay points.
+    out.direct = out.pointIds.empty() && out.planes.size() <= kMaxDirectPlanes;
+    if (!out.direct &&
+        std::any_of(out.planes.begin(), out.planes.end(), [](const Plane& p) { return p.tilted; }))
+        groupDiscs(centers, normals, radius, false, out, scratch);
+}
+
+void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
+                           float radius, bool tilted, Layout& out, Scratch& scratch) {
+    out.clear();
+    auto& planar = scratch.planar;
+    planar.assign(centers.size(), 0);
+    auto& keyed = scratch.keyed;
+    auto& discs = scratch.discs;
+    auto& uv = scratch.uv;
+    const auto takeDiscs = [&](std::size_t firstCell) {
+        for (std::size_t j = out.cellStart[firstCell]; j < out.cellDiscs.size(); ++j)
+            planar[out.cellDiscs[j]] = 1;
+    };
+
+    // Exact planes. Group the discs of exactly axis-aligned normal by (normal, coordinate along
+    // the axis), bit for bit; the sort keeps the groups, and the discs in them, in a fixed order.
+    keyed.clear();
+    for (std::uint32_t i = 0; i < centers.size(); ++i) {
+        const int axis = exactAxis(normals[i]);
+        if (axis < 0) continue;
+        // + 0.f: a negative zero joins the positive one (the rule gives the same answers).
+        keyed.push_back({{bitsOf(normals[i].x + 0.f), bitsOf(normals[i].y + 0.f),
+                          bitsOf(normals[i].z + 0.f), bitsOf(centers[i][axis] + 0.f)},
+                         i});
+    }
+    std::sort(keyed.begin(), keyed.end());
+    for (std::size_t first = 0; first < keyed.size();) {
+        std::size_t last = first;
+        while (last < keyed.size() && keyed[last].key == keyed[first].key)
+            ++last;
+        const std::span<const Scratch::Keyed> group(keyed.data() + first, last - first);
+        first = last;
+        if (group.size() < kMinPlaneDiscs) continue;
+        Plane plane;
+        plane.normal = normals[group[0].disc];
+        plane.axis = std::uint8_t(exactAxis(plane.normal));
+        plane.u = std::uint8_t((plane.axis + 1) % 3);
+        plane.v = std::uint8_t((plane.axis + 2) % 3);
+        plane.coordinate = centers[group[0].disc][plane.axis];
+        discs.clear();
+        uv.clear();
+        for (const Scratch::Keyed& k : group) {
+            discs.push_back(k.disc);
+            uv.push_back(planeCoordinates(plane, glm::dvec3(centers[k.disc])));
+        }
+        const std::size_t firstCell = out.cellStart.size() - 1;
+        if (addPlane(plane, discs, uv, centers, normals, radius, out, scratch))
+            takeDiscs(firstCell);
+    }
+
+    // Tilted planes. Group the other discs by their normal quantised to kNormalQuantum (a
+    // plane's discs, whose normals differ in their last bits, fall in one group unless it
+    // straddles a step: then in two); within a group, a plane is a run of discs whose offsets
+    // along the mean normal stay within the thickness allowed.
+    keyed.clear();
+    for (std::uint32_t i = 0; tilted && i < centers.size(); ++i) {
+        if (planar[i] || exactAxis(normals[i]) >= 0) continue;
+        std::array<std::uint32_t, 4> key{0, 0, 0, 0};
+        for (int a = 0; a < 3; ++a)
+            key[std::size_t(a)] =
+                std::uint32_t(std::int32_t(std::lround(normals[i][a] / kNormalQuantum)));
+        keyed.push_back({key, i});
+    }
+    std::sort(keyed.begin(), keyed.end());
+    auto& groups = scratch.groups;
+    groups.clear();
+    for (std::size_t first = 0; first < keyed.size();) {
+        std::size_t last = first;
+        while (last < keyed.size() && keyed[last].key == keyed[first].key)
+            ++last;
+        if (last - first >= kMinPlaneDiscs) groups.push_back({first, last});
+        first = last;
+    }
+    const double thickness = kTiltedThicknessRadii * radius;
+    auto& offsets = scratch.offsets;
+    for (const Scratch::Group& group : groups) {
+        // The plane's normal: the mean of those near the group's median normal (discs of
+        // another, rougher surface may share the group).
+        glm::dvec3 median(0.0);
+        for (int a = 0; a < 3; ++a) {
+            auto& values = scratch.values;
+            values.clear();
+            for (std::size_t k = group.first; k < group.end; ++k)
+                values.push_back(normals[keyed[k].disc][a]);
+            std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+            median[a] = values[values.size() / 2];
+        }
+        glm::dvec3 sum(0.0);
+        for (std::size_t k = group.first; k < group.end; ++k)
+            if (glm::length(glm::dvec3(normals[keyed[k].disc]) - median) <= kTiltedNormalSpread)
+                sum += glm::dvec3(normals[keyed[k].disc]);
+        if (!(glm::dot(sum, sum) > 0.0)) continue;
+        const glm::dvec3 n = glm::normalize(sum);
+        offsets.clear();
+        for (std::size_t k = group.first; k < group.end; ++k) {
+            const std::uint32_t disc = keyed[k].disc;
+            if (glm::length(glm::dvec3(normals[disc]) - n) <= kTiltedNormalSpread)
+                offsets.push_back({glm::dot(n, glm::dvec3(centers[disc])), disc});
+        }
+        std::sort(offsets.begin(), offsets.end());
+        // A basis of the plane: u across the axis n leans on least.
+        glm::dvec3 across(0.0);
+        const glm::dvec3 an = glm::abs(n);
+        across[an.x <= an.y && an.x <= an.z ? 0 : an.y <= an.z ? 1 : 2] = 1.0;
+        const glm::dvec3 uAxis = glm::normalize(glm::cross(n, across));
+        const glm::dvec3 vAxis = glm::cross(n, uAxis);
+        for (std::size_t first = 0; first < offsets.size();) {
+            std::size_t last = first;
+            while (last < offsets.size() &&
+                   offsets[last].offset - offsets[first].offset <= thickness)
+                ++last;
+            const std::span<const Scratch::Offset> run(offsets.data() + first, last - first);
+            first = last;
+            if (run.size() < kMinPlaneDiscs) continue;
+            Plane plane;
+            plane.tilted = true;
+            plane.unitNormal = n;
+            plane.uAxis = uAxis;
+            plane.vAxis = vAxis;
+            plane.normal = glm::vec3(n);
+            plane.offset = 0.5 * (run.front().offset + run.back().offset);
+            // h: how far a disc's own plane lies from the patch's within a radius of its centre,
+            // plus the rounding of the rectangles' float corners.
+            double separation = 0.0, reach = 0.0;
+            glm::dvec3 lo(std::numeric_limits<double>::max()),
+                hi(-std::numeric_limits<double>::max());
+            discs.clear();
+            uv.clear();
+            for (const Scratch::Offset& o : run) {
+                const glm::dvec3 c(centers[o.disc]);
+                separation =
+                    std::max(separation, std::abs(o.offset - plane.offset) +
+                                             glm::length(glm::dvec3(normals[o.disc]) - n) * radius);
+                reach = std::max(reach, glm::length(c));
+                lo = glm::min(lo, c);
+                hi = glm::max(hi, c);
+                discs.push_back(o.disc);
+                uv.push_back(planeCoordinates(plane, c));
+            }
+            separation += 4.0 * std::ldexp(reach + 2.0 * radius, -23);
+            plane.minCosine = std::min(1.0, separation / (kTiltedReachRadii * radius));
+            const glm::dvec3 widen(double(radius) * (1.0 + double(kEmbreeSlack)) + separation);
+            plane.boxMin = lo - widen;
+            plane.boxMax = hi + widen;
+            const std::size_t firstCell = out.cellStart.size() - 1;
+            if (!addPlane(plane, discs, uv, centers, normals, radius, out, scratch)) continue;
+            takeDiscs(firstCell);
+        }
+    }
+
+    for (std::uint32_t i = 0; i < centers.size(); ++i) {
+        if (planar[i]) continue;
+        out.pointIds.push_back(i);
+        out.pointDiscs.push_back(glm::vec4(centers[i], radius * kEmbreeWiden));
+        out.pointNormals.push_back(normals[i]);
+    }
+    out.pointNormals.push_back(glm::vec3(0.f)); // the padding
+}
+
+void DiscIndex::attachGeometries(RTCDevice device, RTCScene scene, Layout& layout,
+                                 GeometryHandle& points, GeometryHandle& patches) {
+    // Embree shares the layout's buffers; a geometry already attached takes them anew (they
+    // may have moved or changed size) and is committed again.
+    const std::size_t pointCount = layout.pointIds.size();
+    if (pointCount > 0) {
+        const bool fresh = points.get() == nullptr;
+        if (fresh) {
+            points = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT));
+            rtcSetGeometryOccludedFilterFunction(points.get(), &DiscIndex::recordCrossings);
+        }
+        rtcSetSharedGeometryBuffer(points.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
+                                   layout.pointDiscs.data(), 0, sizeof(glm::vec4), pointCount);
+        rtcSetSharedGeometryBuffer(points.get(), RTC_BUFFER_TYPE_NORMAL, 0, RTC_FORMAT_FLOAT3,
+                                   layout.pointNormals.data(), 0, sizeof(glm::vec3), pointCount);
+        rtcCommitGeometry(points.get());
+        if (fresh) rtcAttachGeometry(scene, points.get());
+    }
+    if (!layout.rectangles.empty()) {
+        const bool fresh = patches.get() == nullptr;
+        if (fresh) {
+            patches = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE));
+            rtcSetGeometryOccludedFilterFunction(patches.get(), &DiscIndex::recordPlaneCrossings);
+        }
+        rtcSetSharedGeometryBuffer(patches.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                   layout.patchVertices.data(), 0, sizeof(glm::vec4),
+                                   layout.patchVertices.size());
+        rtcSetSharedGeometryBuffer(patches.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                   layout.patchTriangles.data(), 0, sizeof(glm::uvec3),
+                                   layout.patchTriangles.size());
+        rtcCommitGeometry(patches.get());
+        if (fresh) rtcAttachGeometry(scene, patches.get());
+    }
+    rtcCommitScene(scene);
+}
+
+SceneHandle DiscIndex::newScene(RTCDevice device, Motion motion) {
+    SceneHandle scene(rtcNewScene(device));
+    rtcSetSceneBuildQuality(scene.get(), motion == Motion::Static ? RTC_BUILD_QUALITY_HIGH
+                                                                  : RTC_BUILD_QUALITY_LOW);
+    if (motion == Motion::Moving) rtcSetSceneFlags(scene.get(), RTC_SCENE_FLAG_DYNAMIC);
+    return scene;
 }
 
 void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
@@ -266,75 +506,30 @@ void DiscIndex::build(std::span<const glm::vec3> centers, std::span<const glm::v
         if (!isFinite(centers[i]) || !isFinite(normals[i]))
             fail("DiscIndex: disc ", i, " has a non-finite centre or normal");
 
-    Layout layout;
-    if (mMotion == Motion::Static) {
-        splitIntoPlanes(centers, normals, radius, layout);
-    } else {
-        layout.pointIds.resize(centers.size());
-        std::iota(layout.pointIds.begin(), layout.pointIds.end(), 0u);
-    }
-
     mDevice.takeError(); // earlier errors were logged; this build reports only its own
     const RTCDevice device = mDevice.handle();
     if (rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0)
         fail("DiscIndex: this Embree was built with backface culling; the disc index needs "
              "two-sided triangles");
-    SceneHandle scene(rtcNewScene(device));
-    rtcSetSceneBuildQuality(scene.get(), mMotion == Motion::Static ? RTC_BUILD_QUALITY_HIGH
-                                                                   : RTC_BUILD_QUALITY_LOW);
-    if (mMotion == Motion::Moving) rtcSetSceneFlags(scene.get(), RTC_SCENE_FLAG_DYNAMIC);
-
-    // Embree shares these buffers; they are moved into the members only once the build has
-    // succeeded (moving a vector keeps its storage), so a failure leaves the old index intact.
-    const std::size_t points = layout.pointIds.size();
-    std::vector<glm::vec4> discs(points);
-    std::vector<glm::vec3> padded(points + 1, glm::vec3(0.f));
-    for (std::size_t i = 0; i < points; ++i) {
-        discs[i] = glm::vec4(centers[layout.pointIds[i]], radius * kEmbreeWiden);
-        padded[i] = normals[layout.pointIds[i]];
+    // Everything is made aside and moved into the members only once the build has succeeded
+    // (moving a vector keeps its storage, which Embree shares), so a failure leaves the old
+    // index intact.
+    Layout layout;
+    makeLayout(centers, normals, radius, layout, *mScratch);
+    SceneHandle scene;
+    GeometryHandle points, patches;
+    if (!layout.direct) {
+        scene = newScene(device, mMotion);
+        attachGeometries(device, scene.get(), layout, points, patches);
     }
-    GeometryHandle geometry;
-    if (points > 0) {
-        geometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_ORIENTED_DISC_POINT));
-        rtcSetSharedGeometryBuffer(geometry.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4,
-                                   discs.data(), 0, sizeof(glm::vec4), points);
-        rtcSetSharedGeometryBuffer(geometry.get(), RTC_BUFFER_TYPE_NORMAL, 0, RTC_FORMAT_FLOAT3,
-                                   padded.data(), 0, sizeof(glm::vec3), points);
-        rtcSetGeometryOccludedFilterFunction(geometry.get(), &DiscIndex::recordCrossings);
-        rtcCommitGeometry(geometry.get());
-        rtcAttachGeometry(scene.get(), geometry.get());
-    }
-    GeometryHandle planeGeometry;
-    if (!layout.rectangles.empty()) {
-        planeGeometry = GeometryHandle(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE));
-        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_VERTEX, 0,
-                                   RTC_FORMAT_FLOAT3, layout.patchVertices.data(), 0,
-                                   sizeof(glm::vec4), layout.patchVertices.size());
-        rtcSetSharedGeometryBuffer(planeGeometry.get(), RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                   layout.patchTriangles.data(), 0, sizeof(glm::uvec3),
-                                   layout.patchTriangles.size());
-        rtcSetGeometryOccludedFilterFunction(planeGeometry.get(), &DiscIndex::recordPlaneCrossings);
-        rtcCommitGeometry(planeGeometry.get());
-        rtcAttachGeometry(scene.get(), planeGeometry.get());
-    }
-    rtcCommitScene(scene.get());
     if (const auto error = mDevice.takeError())
         fail("DiscIndex: Embree failed to build ", centers.size(), " discs: ", error->message);
     mScene = std::move(scene);
-    mGeometry = std::move(geometry);
-    mPlaneGeometry = std::move(planeGeometry);
+    mGeometry = std::move(points);
+    mPlaneGeometry = std::move(patches);
+    mLayout = std::move(layout);
     mCenters.assign(centers.begin(), centers.end());
     mNormals.assign(normals.begin(), normals.end());
-    mPointDiscs = std::move(discs);
-    mPointNormals = std::move(padded);
-    mPointIds = std::move(layout.pointIds);
-    mPlanes = std::move(layout.planes);
-    mCellStart = std::move(layout.cellStart);
-    mCellDiscs = std::move(layout.cellDiscs);
-    mCellCenters = std::move(layout.cellCenters);
-    mRectangles = std::move(layout.rectangles);
-    mPatchVertices = std::move(layout.patchVertices);
-    mPatchTriangles = std::move(layout.patchTriangles);
     mRadius = radius;
     updateBox();
 }
@@ -348,14 +543,26 @@ void DiscIndex::move(std::span<const glm::vec3> centers, std::span<const glm::ve
         QGI_ASSERT(isFinite(centers[i]) && isFinite(normals[i]), "non-finite disc ", i);
         mCenters[i] = centers[i];
         mNormals[i] = normals[i];
-        mPointDiscs[i] = glm::vec4(centers[i], mRadius * kEmbreeWiden);
-        mPointNormals[i] = normals[i];
     }
+    makeLayout(mCenters, mNormals, mRadius, mLayout, *mScratch);
     updateBox();
-    rtcUpdateGeometryBuffer(mGeometry.get(), RTC_BUFFER_TYPE_VERTEX, 0);
-    rtcUpdateGeometryBuffer(mGeometry.get(), RTC_BUFFER_TYPE_NORMAL, 0);
-    rtcCommitGeometry(mGeometry.get());
-    rtcCommitScene(mScene.get());
+    if (mLayout.direct) { // no Embree
+        mGeometry = {};
+        mPlaneGeometry = {};
+        mScene = {};
+        return;
+    }
+    // A scene whose kinds of geometry change (the discs turned into or out of planes) is made
+    // anew; otherwise the geometries take the refilled buffers.
+    const RTCDevice device = mDevice.handle();
+    if (!mScene.get() || (mGeometry.get() != nullptr) != !mLayout.pointIds.empty() ||
+        (mPlaneGeometry.get() != nullptr) != !mLayout.rectangles.empty()) {
+        mGeometry = {};
+        mPlaneGeometry = {};
+        mScene = newScene(device, mMotion);
+    }
+    attachGeometries(device, mScene.get(), mLayout, mGeometry, mPlaneGeometry);
+    QGI_ASSERT(!mDevice.takeError(), "Embree failed to refit a moved disc index");
 }
 
 void DiscIndex::consider(const QueryContext& query, std::uint32_t position, std::uint32_t s,
@@ -370,6 +577,25 @@ void DiscIndex::consider(const QueryContext& query, std::uint32_t position, std:
     query.pairs->push_back(std::uint64_t(position) << 32 | disc);
 }
 
+void DiscIndex::considerCells(const QueryContext& query, std::uint32_t position, std::uint32_t s,
+                              const Plane& plane, std::uint32_t c0, std::uint32_t c1,
+                              std::uint32_t r0, std::uint32_t r1, const glm::dvec2* point) {
+    const Layout& layout = query.index->mLayout;
+    const glm::vec2 p = point ? glm::vec2(*point - plane.corner) : glm::vec2(0.f);
+    for (std::uint32_t r = r0; r <= r1; ++r) {
+        const std::size_t rowCells = plane.firstCell + std::size_t(r) * plane.columns;
+        const std::uint32_t end = layout.cellStart[rowCells + c1 + 1];
+        for (std::uint32_t j = layout.cellStart[rowCells + c0]; j < end; ++j) {
+            if (point) { // far from the crossing point: no need for the rule
+                const glm::vec2 offset = layout.cellPoints[j] - p;
+                if (offset.x * offset.x + offset.y * offset.y > plane.reach2) continue;
+            }
+            consider(query, position, s, layout.cellDiscs[j], layout.cellCenters[j],
+                     layout.cellNormals[j]);
+        }
+    }
+}
+
 void DiscIndex::recordCrossings(const RTCFilterFunctionNArguments* args) {
     const auto* query = reinterpret_cast<const QueryContext*>(args->context);
     for (unsigned i = 0; i < args->N; ++i) {
@@ -377,47 +603,66 @@ void DiscIndex::recordCrossings(const RTCFilterFunctionNArguments* args) {
         args->valid[i] = 0; // rejected: traversal goes on to the next disc
         const std::uint32_t position = RTCRayN_id(args->ray, args->N, i);
         const DiscIndex& index = *query->index;
-        const std::uint32_t disc = index.mPointIds[RTCHitN_primID(args->hit, args->N, i)];
+        const std::uint32_t disc = index.mLayout.pointIds[RTCHitN_primID(args->hit, args->N, i)];
         consider(*query, position, query->indices[position], disc, index.mCenters[disc],
                  index.mNormals[disc]);
     }
 }
 
+void DiscIndex::crossPlane(const QueryContext& query, std::uint32_t position, std::uint32_t s,
+                           const Plane& plane, const double* range) {
+    const glm::vec3& o = query.segments->origin[s];
+    const glm::vec3& d = query.segments->direction[s];
+    glm::dvec2 uv;
+    if (plane.tilted) {
+        QGI_ASSERT(range, "tilted planes are queried directly");
+        const double cosine = glm::dot(glm::dvec3(d), plane.unitNormal);
+        if (!(cosine <= -plane.minCosine)) {
+            // From behind: no disc of the plane faces the segment. Grazing: the crossing point
+            // is no guide, so every disc, where the segment comes near the plane's discs.
+            if (std::abs(cosine) < plane.minCosine) {
+                const auto [near, far] =
+                    clipToBox(o, d, range[0], range[1], plane.boxMin, plane.boxMax);
+                if (near <= far)
+                    considerCells(query, position, s, plane, 0, plane.columns - 1, 0,
+                                  plane.rows - 1, nullptr);
+            }
+            return;
+        }
+        const double t = (plane.offset - glm::dot(glm::dvec3(o), plane.unitNormal)) / cosine;
+        if (!(t >= range[0] && t <= range[1])) return;
+        uv = planeCoordinates(plane, glm::dvec3(o) + t * glm::dvec3(d));
+    } else {
+        // From behind or parallel: crossesDisc() turns down every disc of the plane. The
+        // crossing point as crossesDisc() computes it, in float.
+        if (!(d[plane.axis] * plane.normal[plane.axis] < 0.f)) return;
+        const float t = (plane.coordinate - o[plane.axis]) / d[plane.axis];
+        if (range && !(double(t) >= range[0] && double(t) <= range[1])) return;
+        uv = {o[plane.u] + t * d[plane.u], o[plane.v] + t * d[plane.v]};
+    }
+    // A crossing point that is not finite is no disc's: crossesDisc() would say so too. Nor is
+    // one off the grid, which reaches a cell past every disc's.
+    const double cell = double(kPlaneCellRadii) * query.index->mRadius;
+    const double column = std::floor((uv.x - plane.corner.x) / cell);
+    const double row = std::floor((uv.y - plane.corner.y) / cell);
+    if (!(column >= 0.0 && column < double(plane.columns) && row >= 0.0 &&
+          row < double(plane.rows)))
+        return;
+    const auto c = std::uint32_t(column), r = std::uint32_t(row);
+    considerCells(query, position, s, plane, c > 0 ? c - 1 : 0, std::min(c + 1, plane.columns - 1),
+                  r > 0 ? r - 1 : 0, std::min(r + 1, plane.rows - 1), &uv);
+}
+
 void DiscIndex::recordPlaneCrossings(const RTCFilterFunctionNArguments* args) {
     const auto* query = reinterpret_cast<const QueryContext*>(args->context);
-    const DiscIndex& index = *query->index;
-    const PhotonSegments& segments = *query->segments;
-    const float cell = kPlaneCellRadii * index.mRadius;
+    const Layout& layout = query->index->mLayout;
     for (unsigned i = 0; i < args->N; ++i) {
         if (args->valid[i] == 0) continue;
         args->valid[i] = 0; // rejected: traversal goes on
         const std::uint32_t position = RTCRayN_id(args->ray, args->N, i);
-        const std::uint32_t s = query->indices[position];
         const std::uint32_t rectangle = RTCHitN_primID(args->hit, args->N, i) / 2;
-        const Plane& plane = index.mPlanes[index.mRectangles[rectangle].plane];
-        const glm::vec3& o = segments.origin[s];
-        const glm::vec3& d = segments.direction[s];
-        // From behind or parallel: crossesDisc() turns down every disc of the plane.
-        if (!(d[plane.axis] * plane.normal[plane.axis] < 0.f)) continue;
-        const float t = (plane.coordinate - o[plane.axis]) / d[plane.axis];
-        const float u = o[plane.u] + t * d[plane.u], v = o[plane.v] + t * d[plane.v];
-        // A crossing point that is not finite is no disc's: crossesDisc() would say so too.
-        if (!std::isfinite(u) || !std::isfinite(v)) continue;
-        const auto column = std::uint32_t(
-            std::clamp(std::floor((u - plane.corner.x) / cell), 0.f, float(plane.columns - 1)));
-        const auto row = std::uint32_t(
-            std::clamp(std::floor((v - plane.corner.y) / cell), 0.f, float(plane.rows - 1)));
-        const std::uint32_t c0 = column > 0 ? column - 1 : 0;
-        const std::uint32_t c1 = std::min(column + 1, plane.columns - 1);
-        const std::uint32_t r0 = row > 0 ? row - 1 : 0;
-        const std::uint32_t r1 = std::min(row + 1, plane.rows - 1);
-        for (std::uint32_t r = r0; r <= r1; ++r) {
-            const std::size_t rowCells = plane.firstCell + std::size_t(r) * plane.columns;
-            const std::uint32_t end = index.mCellStart[rowCells + c1 + 1];
-            for (std::uint32_t j = index.mCellStart[rowCells + c0]; j < end; ++j)
-                consider(*query, position, s, index.mCellDiscs[j], index.mCellCenters[j],
-                         plane.normal);
-        }
+        crossPlane(*query, position, query->indices[position],
+                   layout.planes[layout.rectangles[rectangle].plane], nullptr);
     }
 }
 
@@ -445,17 +690,24 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
         const std::uint32_t s = query.indices[k];
         const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
-        // The part of the segment Embree sees, in the segment's t: from the counted part's
-        // start to the end past the landing tolerance, kEmbreeSlack radii wider at each end,
-        // then clipped to the box around the discs. In double: Embree's ray starts where the
-        // clipped part does, so that a segment from far away (a distant light) is traced from
-        // near the discs and Embree's rounding stays that of the scene's scale.
+        // The part of the segment Embree sees (or the planes, in a direct query), in the
+        // segment's t: from the counted part's start to the end past the landing tolerance,
+        // kEmbreeSlack radii wider at each end, then clipped to the box around the discs. In
+        // double: Embree's ray starts where the clipped part does, so that a segment from far
+        // away (a distant light) is traced from near the discs and Embree's rounding stays that
+        // of the scene's scale.
         const auto [start, stop] = clipToBox(
             o, d,
             (query.beyond ? std::max(0.0, double(query.beyond[k]) + endTolerance) : 0.0) - slack,
             double(segments.length[s]) + endTolerance + slack, // +inf stays +inf
             mBoxMin, mBoxMax);
         if (!(start <= stop)) continue; // misses the box: no disc to cross
+        if (mLayout.direct) {           // plane by plane: they are few
+            const double range[2] = {start, stop};
+            for (const Plane& plane : mLayout.planes)
+                crossPlane(context, std::uint32_t(k), s, plane, range);
+            continue;
+        }
         RTCRay ray;
         ray.org_x = float(o.x + start * d.x);
         ray.org_y = float(o.y + start * d.y);

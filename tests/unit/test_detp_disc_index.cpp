@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -372,6 +373,177 @@ TEST(DetpDiscIndex, PlanePatchesStayExactForSegmentsFromFarAway) {
     const std::vector<DiscCrossing> expected = bruteForce(segments, indices, discs, kRadius);
     EXPECT_GT(expected.size(), 4000u);
     expectSamePairs(actual, expected);
+}
+
+/// Discs on tilted planes as a refined mesh gives them: centres computed in float on the plane
+/// (so off it by rounding) and normals that differ from the face's in their last bits. A
+/// block turned about two axes (five faces; the bottom is left out) and a wall parallel to one
+/// of its faces 2 cm behind it; with `rough`, also a face too noisy to be a plane (normals 1e-3
+/// apart).
+constexpr std::size_t kTiltedPlanarDiscs = 6 * 15 * 15; // listed first
+
+Discs tiltedDiscs(std::mt19937& rng, const glm::vec3& origin, const glm::mat3& turn, bool rough,
+                  float normalNoise = 2e-7f) {
+    std::uniform_real_distribution<float> noise(-1.f, 1.f);
+    Discs discs;
+    const auto face = [&](const glm::vec3& corner, const glm::vec3& a, const glm::vec3& b,
+                          int steps, float spread) {
+        const glm::vec3 n = glm::normalize(glm::cross(a, b));
+        for (int i = 0; i <= steps; ++i)
+            for (int j = 0; j <= steps; ++j) {
+                const float fi = float(i) / float(steps), fj = float(j) / float(steps);
+                discs.centers.push_back(origin + turn * (corner + fi * a + fj * b));
+                const glm::vec3 jitter(noise(rng), noise(rng), noise(rng));
+                discs.normals.push_back(glm::normalize(turn * n + spread * jitter));
+            }
+    };
+    const glm::vec3 x(0.3f, 0.f, 0.f), y(0.f, 0.3f, 0.f), z(0.f, 0.f, 0.3f);
+    face({0.f, 0.f, 0.3f}, x, y, 14, normalNoise);   // +z
+    face({0.f, 0.f, 0.f}, y, x, 14, normalNoise);    // -z
+    face({0.3f, 0.f, 0.f}, y, z, 14, normalNoise);   // +x
+    face({0.f, 0.f, 0.f}, z, y, 14, normalNoise);    // -x
+    face({0.f, 0.3f, 0.f}, z, x, 14, normalNoise);   // +y
+    face({0.f, 0.f, -0.02f}, y, x, 14, normalNoise); // the wall behind -z, facing the same way
+    if (rough) face({-0.3f, 0.f, 0.f}, z, y, 6, 1e-3f);
+    return discs;
+}
+
+glm::mat3 turned(float a, float b) {
+    const glm::mat3 ry(std::cos(a), 0.f, -std::sin(a), 0.f, 1.f, 0.f, std::sin(a), 0.f,
+                       std::cos(a));
+    const glm::mat3 rx(1.f, 0.f, 0.f, 0.f, std::cos(b), std::sin(b), 0.f, -std::sin(b),
+                       std::cos(b));
+    return rx * ry;
+}
+
+/// Random segments, plus what strains a tilted plane's lookup, aimed at the planes' discs:
+/// landings on a disc's plane at |cos| from 1e-5 to 1e-1 (on both sides of the planes' minimum
+/// cosine), segments nearly in a plane passing over its discs, landings at a rim, and segments
+/// from 100 m (5,000 radii) away.
+PhotonSegments tiltedSegments(std::mt19937& rng, const Discs& discs, float radius) {
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::uniform_int_distribution<std::size_t> pick(0, kTiltedPlanarDiscs - 1);
+    PhotonSegments segments = randomSegments(rng, discs, radius, 6000);
+    for (int i = 0; i < 8000; ++i) {
+        const std::size_t j = pick(rng);
+        const glm::vec3 n = discs.normals[j];
+        const glm::vec3 tangent = glm::normalize(glm::cross(n, randomUnit(rng)));
+        const float grazing = std::pow(10.f, -5.f + 4.f * unit(rng));
+        if (i % 4 == 0) {
+            const glm::vec3 end = discs.centers[j] + (1.1f * radius * unit(rng)) * tangent;
+            const glm::vec3 d = glm::normalize(tangent - grazing * n);
+            addSegment(segments, end - 0.4f * d, d, 0.4f, 1);
+        } else if (i % 4 == 1) {
+            const glm::vec3 over = discs.centers[j] + (grazing * radius * (unit(rng) - 0.3f)) * n;
+            const glm::vec3 d = glm::normalize(tangent - grazing * (unit(rng) - 0.5f) * n);
+            addSegment(segments, over - 0.2f * d, d, i % 8 == 1 ? kInf : 0.4f, 1);
+        } else if (i % 4 == 2) {
+            const glm::vec3 end = discs.centers[j] + radius * tangent;
+            const glm::vec3 d = glm::normalize(-n + 0.5f * randomUnit(rng));
+            addSegment(segments, end - 0.3f * d, d, 0.3f, 1);
+        } else {
+            const glm::vec3 d = glm::normalize(-n + 0.3f * randomUnit(rng));
+            addSegment(segments, discs.centers[j] - 100.f * d, d, kInf, 1);
+        }
+    }
+    return segments;
+}
+
+void expectBruteForce(DiscIndex& index, const Discs& discs, const PhotonSegments& segments,
+                      float radius, std::mt19937& rng, std::size_t atLeast) {
+    std::vector<std::uint32_t> indices(segments.size());
+    std::iota(indices.begin(), indices.end(), 0u);
+    std::shuffle(indices.begin(), indices.end(), rng);
+    std::vector<DiscCrossing> actual;
+    index.collectCrossings(segments, indices, actual);
+    const std::vector<DiscCrossing> expected = bruteForce(segments, indices, discs, radius);
+    EXPECT_GT(expected.size(), atLeast);
+    expectSamePairs(actual, expected);
+
+    // Cut copies: the crossings beyond a length.
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    std::vector<float> beyond(indices.size());
+    for (std::size_t k = 0; k < indices.size(); ++k) {
+        const float length = segments.length[indices[k]];
+        beyond[k] = k % 2 == 0 ? -kInf : (std::isinf(length) ? 2.f : length) * unit(rng);
+    }
+    std::vector<std::size_t> position(segments.size());
+    for (std::size_t k = 0; k < indices.size(); ++k)
+        position[indices[k]] = k;
+    std::vector<DiscCrossing> cut;
+    for (const DiscCrossing& c : expected)
+        if (!crossesDisc(segments.origin[c.segment], segments.direction[c.segment],
+                         beyond[position[c.segment]], discs.centers[c.disc], discs.normals[c.disc],
+                         radius))
+            cut.push_back(c);
+    EXPECT_LT(cut.size(), expected.size());
+    index.collectCrossings(segments, indices, actual, beyond);
+    expectSamePairs(actual, cut);
+}
+
+// A few planes, every disc in one: queried plane by plane, tilted planes and all.
+TEST(DetpDiscIndex, DirectQueriesOfTiltedPlanesMatchBruteForce) {
+    std::mt19937 rng(31);
+    constexpr float kRadius = 0.02f;
+    const Discs discs = tiltedDiscs(rng, {0.4f, 0.2f, -0.1f}, turned(0.5f, 0.3f), false);
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    EXPECT_TRUE(index.direct());
+    EXPECT_EQ(index.planeCount(), 6u);
+    EXPECT_EQ(index.tiltedPlaneCount(), 6u);
+    EXPECT_EQ(index.planarDiscCount(), kTiltedPlanarDiscs);
+    expectBruteForce(index, discs, tiltedSegments(rng, discs, kRadius), kRadius, rng, 5000);
+}
+
+// With discs that fit no plane the index goes through Embree, and its tilted discs stay points
+// (exact down to |cos| of about 1e-4: the segments here are random, none skims a face).
+TEST(DetpDiscIndex, TiltedDiscsBesidePointsStayPoints) {
+    std::mt19937 rng(33);
+    constexpr float kRadius = 0.02f;
+    const Discs discs = tiltedDiscs(rng, {0.4f, 0.2f, -0.1f}, turned(0.5f, 0.3f), true);
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    EXPECT_FALSE(index.direct());
+    EXPECT_EQ(index.planeCount(), 0u);
+    expectBruteForce(index, discs, randomSegments(rng, discs, kRadius, 9000), kRadius, rng, 500);
+}
+
+TEST(DetpDiscIndex, MovingPlanesMatchBruteForce) {
+    std::mt19937 rng(32);
+    constexpr float kRadius = 0.02f;
+    EmbreeDevice device;
+    // A block: exact planes unturned and without rounding, tilted ones once turned, all queried
+    // directly. The last move slides without a turn.
+    Discs discs = tiltedDiscs(rng, glm::vec3(0.f), glm::mat3(1.f), false, 0.f);
+    DiscIndex index(device, DiscIndex::Motion::Moving);
+    index.build(discs.centers, discs.normals, kRadius);
+    EXPECT_TRUE(index.direct());
+    EXPECT_EQ(index.planeCount(), 6u);
+    EXPECT_EQ(index.tiltedPlaneCount(), 0u);
+    const glm::mat3 turns[] = {turned(0.2f, 0.f), turned(0.7f, -0.4f), turned(0.7f, -0.4f)};
+    const glm::vec3 places[] = {{0.1f, 0.f, 0.f}, {0.3f, -0.2f, 0.5f}, {0.31f, -0.2f, 0.5f}};
+    for (int step = 0; step < 3; ++step) {
+        discs = tiltedDiscs(rng, places[step], turns[step], false);
+        index.move(discs.centers, discs.normals);
+        EXPECT_TRUE(index.direct()) << "step " << step;
+        EXPECT_EQ(index.tiltedPlaneCount(), 6u) << "step " << step;
+        expectBruteForce(index, discs, tiltedSegments(rng, discs, kRadius), kRadius, rng, 5000);
+    }
+    // Exact planes beside points, through Embree, sliding.
+    discs = axisAlignedDiscs(rng);
+    DiscIndex mixed(device, DiscIndex::Motion::Moving);
+    mixed.build(discs.centers, discs.normals, kRadius);
+    for (int step = 0; step < 2; ++step) {
+        for (glm::vec3& c : discs.centers)
+            c += glm::vec3(0.25f, -0.125f, 0.5f); // exact in float: the planes stay exact
+        mixed.move(discs.centers, discs.normals);
+        EXPECT_FALSE(mixed.direct());
+        EXPECT_EQ(mixed.planeCount(), 4u);
+        expectBruteForce(mixed, discs, randomSegments(rng, discs, kRadius, 6000), kRadius, rng,
+                         1000);
+    }
 }
 
 TEST(DetpDiscIndex, RejectsBadInput) {
