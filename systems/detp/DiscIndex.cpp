@@ -35,6 +35,9 @@ constexpr float kDiagonalOverlap = 0.02f;
 /// crossing point in the plane: the distance the 3 x 3 cells around it guarantee, so the
 /// quarter radius the lookup has to spare for rounding stays (see the class comment).
 constexpr double kLookupReach = 1.25;
+/// A tilted plane whose lookup would need |cos| above this (its coordinates' rounding is large
+/// for the radius) is not made: a twentieth of all segments would test each of its discs.
+constexpr double kMaxTiltedMinCosine = 0.05;
 /// Tilted discs are grouped by their unit normal rounded to this step.
 constexpr double kNormalQuantum = 1.0 / 1024.0;
 /// A plane becomes a patch only while its grid has at most this many cells per disc (plus
@@ -434,7 +437,10 @@ void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const g
                 uv.push_back(planeCoordinates(plane, c));
             }
             separation += 4.0 * std::ldexp(reach + 2.0 * radius, -23);
-            plane.minCosine = std::min(1.0, separation / (kTiltedReachRadii * radius));
+            plane.minCosine = separation / (kTiltedReachRadii * radius);
+            // Coordinates so large for the radius that many segments would test every disc:
+            // the discs stay points.
+            if (!(plane.minCosine <= kMaxTiltedMinCosine)) continue;
             const glm::dvec3 widen(double(radius) * (1.0 + double(kEmbreeSlack)) + separation);
             plane.boxMin = lo - widen;
             plane.boxMax = hi + widen;

@@ -510,6 +510,20 @@ TEST(DetpDiscIndex, TiltedDiscsBesidePointsStayPoints) {
     expectBruteForce(index, discs, randomSegments(rng, discs, kRadius, 9000), kRadius, rng, 500);
 }
 
+// Five kilometres from the origin the rounding of the discs' coordinates is large for a
+// 2 cm radius: a tilted plane's lookup would leave most segments to test every disc, so the
+// discs stay points (and the exact planes are still planes).
+TEST(DetpDiscIndex, TiltedPlanesFarFromTheOriginStayPoints) {
+    std::mt19937 rng(34);
+    constexpr float kRadius = 0.02f;
+    const Discs discs = tiltedDiscs(rng, {5000.f, 0.f, 0.f}, turned(0.5f, 0.3f), false);
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    EXPECT_EQ(index.tiltedPlaneCount(), 0u);
+    EXPECT_FALSE(index.direct());
+}
+
 TEST(DetpDiscIndex, MovingPlanesMatchBruteForce) {
     std::mt19937 rng(32);
     constexpr float kRadius = 0.02f;
