@@ -510,18 +510,30 @@ TEST(DetpDiscIndex, TiltedDiscsBesidePointsStayPoints) {
     expectBruteForce(index, discs, randomSegments(rng, discs, kRadius, 9000), kRadius, rng, 500);
 }
 
-// Five kilometres from the origin the rounding of the discs' coordinates is large for a
-// 2 cm radius: a tilted plane's lookup would leave most segments to test every disc, so the
-// discs stay points (and the exact planes are still planes).
+// Five kilometres from the origin the rounding of coordinates is large for a 2 cm radius: a
+// tilted plane's lookup would leave most segments to test every disc, so the discs stay
+// points, even on a plane as flat as floats allow (x + y the same for every centre, bit for
+// bit, and one normal).
 TEST(DetpDiscIndex, TiltedPlanesFarFromTheOriginStayPoints) {
-    std::mt19937 rng(34);
-    constexpr float kRadius = 0.02f;
-    const Discs discs = tiltedDiscs(rng, {5000.f, 0.f, 0.f}, turned(0.5f, 0.3f), false);
+    constexpr float kRadius = 0.02f, kStep = 1.f / 64.f; // steps exact in float
+    Discs discs;
+    for (int i = 0; i < 16; ++i)
+        for (int j = 0; j < 16; ++j) {
+            discs.centers.push_back(
+                {5000.f + kStep * float(i), 1000.f - kStep * float(i), kStep * float(j)});
+            discs.normals.push_back(glm::normalize(glm::vec3(1.f, 1.f, 0.f)));
+        }
     EmbreeDevice device;
     DiscIndex index(device, DiscIndex::Motion::Static);
     index.build(discs.centers, discs.normals, kRadius);
-    EXPECT_EQ(index.tiltedPlaneCount(), 0u);
+    EXPECT_EQ(index.planeCount(), 0u);
     EXPECT_FALSE(index.direct());
+    // Near the origin the same plane is one.
+    for (glm::vec3& c : discs.centers)
+        c -= glm::vec3(5000.f, 1000.f, 0.f);
+    index.build(discs.centers, discs.normals, kRadius);
+    EXPECT_EQ(index.tiltedPlaneCount(), 1u);
+    EXPECT_TRUE(index.direct());
 }
 
 TEST(DetpDiscIndex, MovingPlanesMatchBruteForce) {
