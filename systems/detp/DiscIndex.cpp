@@ -419,7 +419,8 @@ void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const g
             plane.normal = glm::vec3(n);
             plane.offset = 0.5 * (run.front().offset + run.back().offset);
             // h: how far a disc's own plane lies from the patch's within a radius of its centre,
-            // plus the rounding of the rectangles' float corners.
+            // plus a few float steps of the coordinates (the rule's own rounding: it works in
+            // float, the lookup in double).
             double separation = 0.0, reach = 0.0;
             glm::dvec3 lo(std::numeric_limits<double>::max()),
                 hi(-std::numeric_limits<double>::max());

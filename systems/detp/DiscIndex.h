@@ -42,7 +42,7 @@ struct PhotonSegments;
  *        block's sides). The discs' normals and planes agree only to rounding (a refined face's
  *        vertex normals differ in their last bits), within kTiltedNormalSpread and
  *        kTiltedThicknessRadii radii. A disc's own plane then lies within a distance h of the
- *        patch's wherever the disc is (h from those spreads and the rectangles' rounding), so
+ *        patch's wherever the disc is (h from those spreads and the rule's float rounding), so
  *        the patch's crossing point, computed in double, lies within h / |cos| of the disc's,
  *        along the segment and across it. Where h / |cos| is at most kTiltedReachRadii radii,
  *        well inside the lookup's spare quarter radius and Embree's slack, the lookup is exact.
