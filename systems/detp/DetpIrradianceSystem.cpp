@@ -345,16 +345,32 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
     }
     const PhotonSegments& before = delta.oldSegments;
     const PhotonSegments& after = delta.newSegments;
-    for (std::size_t i = 0; i < delta.paths.size(); ++i) {
+    // Where each suffix starts: the hit of the kept prefix's last segment (segment k of a
+    // stored path has bounce k), and within a suffix the hit of the segment before. The
+    // prefixes lie anywhere in the store: read in parallel, the rest in order.
+    const std::size_t paths = delta.paths.size();
+    mPrefixEnd.resize(paths);
+    mPathLight.resize(paths);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, paths, kPathGrain),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                              const PhotonPath& path = store.paths[delta.paths[i]];
+                              const std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
+                              const std::uint32_t head =
+                                  o < delta.oldFirst[i + 1]   ? before.bounce[o]
+                                  : n < delta.newFirst[i + 1] ? after.bounce[n]
+                                                              : 0;
+                              mPrefixEnd[i] = head > 0 && head <= path.count
+                                                  ? store.segments.hitEntity[path.first + head - 1]
+                                                  : Entity{};
+                              mPathLight[i] = path.light;
+                          }
+                      });
+    for (std::size_t i = 0; i < paths; ++i) {
         std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
         const std::uint32_t oldEnd = delta.oldFirst[i + 1], newEnd = delta.newFirst[i + 1];
-        // Where each suffix starts: the hit of the kept prefix's last segment (segment k of a
-        // stored path has bounce k), and within a suffix the hit of the segment before.
-        const PhotonPath& path = store.paths[delta.paths[i]];
-        const std::uint32_t head = o < oldEnd ? before.bounce[o] : n < newEnd ? after.bounce[n] : 0;
-        const Entity prefixEnd = head > 0 && head <= path.count
-                                     ? store.segments.hitEntity[path.first + head - 1]
-                                     : Entity{};
+        const Entity prefixEnd = mPrefixEnd[i];
+        const std::uint16_t light = mPathLight[i];
         const auto list = [&](DeltaPart& part, std::uint32_t first, std::uint32_t s, float beyond) {
             part.indices.push_back(s);
             part.beyond.push_back(beyond);
@@ -363,8 +379,8 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
         const std::uint32_t oldFirst = o, newFirst = n;
         // Not counted (hybrid mode, first segment of a light the renderer draws): skipped on
         // both sides.
-        if (o < oldEnd && !counted(before, o, path.light)) ++o;
-        if (n < newEnd && !counted(after, n, path.light)) ++n;
+        if (o < oldEnd && !counted(before, o, light)) ++o;
+        if (n < newEnd && !counted(after, n, light)) ++n;
         // The two heads are one ray stopped at different lengths: the crossings of the shorter
         // one are also the longer one's and cancel exactly, so only the longer one's crossings
         // beyond the shorter one's end are applied.

@@ -188,6 +188,8 @@ private:
     // Frame scratch, kept so the frame path does not allocate once warm.
     DeltaPart mDeltaParts[2] = {{nullptr, -1.0, {}, {}, {}}, {nullptr, 1.0, {}, {}, {}}};
     std::vector<float> mBeyondList;
+    std::vector<Entity> mPrefixEnd;        ///< splitDelta: per delta path, where its suffix starts
+    std::vector<std::uint16_t> mPathLight; ///< splitDelta: per delta path, its light
     std::vector<std::uint32_t> mMoved;  ///< receiver indices of mobiles that moved
     std::vector<std::uint8_t> mIsMoved; ///< per receiver
     /// Per receiver: in the light (static meshes always; mobiles per MobileMesh::active as the
