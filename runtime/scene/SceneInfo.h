@@ -51,24 +51,29 @@ std::pair<T, T> clipToBox(const glm::vec3& origin, const glm::vec3& direction, T
 
 /// Whether origin + t * direction meets `box` for some t in [0, length] (slab test; t and
 /// length in units of |direction|). An axis the direction does not move along needs the
-/// origin inside the box's slab on that axis.
-inline bool segmentMeetsBox(const glm::vec3& origin, const glm::vec3& direction, float length,
-                            const Aabb& box) {
+/// origin inside the box's slab on that axis. `inverse` is 1 / direction, for testing one
+/// segment against many boxes.
+inline bool segmentMeetsBox(const glm::vec3& origin, const glm::vec3& direction,
+                            const glm::vec3& inverse, float length, const Aabb& box) {
     float near = 0.f, far = length;
     for (int axis = 0; axis < 3; ++axis) {
         if (direction[axis] == 0.f) {
             if (origin[axis] < box.min[axis] || origin[axis] > box.max[axis]) return false;
             continue;
         }
-        const float inverse = 1.f / direction[axis];
-        float t0 = (box.min[axis] - origin[axis]) * inverse;
-        float t1 = (box.max[axis] - origin[axis]) * inverse;
+        float t0 = (box.min[axis] - origin[axis]) * inverse[axis];
+        float t1 = (box.max[axis] - origin[axis]) * inverse[axis];
         if (t0 > t1) std::swap(t0, t1);
         near = std::max(near, t0);
         far = std::min(far, t1);
         if (near > far) return false;
     }
     return true;
+}
+
+inline bool segmentMeetsBox(const glm::vec3& origin, const glm::vec3& direction, float length,
+                            const Aabb& box) {
+    return segmentMeetsBox(origin, direction, 1.f / direction, length, box);
 }
 
 /// World resource describing the loaded scene as a whole.

@@ -304,10 +304,12 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
             for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k) {
                 const std::uint32_t s = path.first + k;
                 const Entity from = k > 0 ? segments.hitEntity[s - 1] : Entity{};
+                const glm::vec3& d = segments.direction[s];
+                const glm::vec3 inverse = 1.f / d;
                 for (std::size_t j = 0; j < count; ++j)
                     if (!skipsLeaving(from, mLeavesFrom[j]) &&
-                        segmentMeetsBox(segments.origin[s], segments.direction[s],
-                                        segments.length[s] + tail, mMobileBoxes[j]))
+                        segmentMeetsBox(segments.origin[s], d, inverse, segments.length[s] + tail,
+                                        mMobileBoxes[j]))
                         lists[j].push_back(s);
             }
         });
