@@ -160,7 +160,6 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
                          std::span<const glm::vec3> normals, float radius, Layout& out,
                          Scratch& scratch) {
     const double cell = double(kPlaneCellRadii) * radius;
-    const double overlap = double(kRectangleOverlap) * cell;
     glm::dvec2 lo(std::numeric_limits<double>::max()), hi(std::numeric_limits<double>::lowest());
     for (const glm::dvec2& p : uv) {
         lo = glm::min(lo, p);
@@ -193,8 +192,6 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
     std::sort(cellOf.begin(), cellOf.end()); // by cell, then by disc within it
     const std::size_t cells = plane.cellCount();
     std::size_t next = 0;
-    auto& active = scratch.active;
-    active.assign(cells, 0);
     for (std::uint32_t c = 0; c < cells; ++c) {
         for (; next < cellOf.size() && cellOf[next].first == c; ++next) {
             const std::uint32_t disc = discs[cellOf[next].second];
@@ -205,6 +202,18 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
         }
         out.cellStart.push_back(std::uint32_t(out.cellDiscs.size()));
     }
+    out.planes.push_back(plane);
+    return true;
+}
+
+void DiscIndex::addRectangles(std::uint32_t planeIndex, float radius, Layout& out,
+                              Scratch& scratch) {
+    const Plane& plane = out.planes[planeIndex];
+    QGI_ASSERT(!plane.tilted, "tilted planes are queried directly, without rectangles");
+    const double cell = double(kPlaneCellRadii) * radius;
+    const double overlap = double(kRectangleOverlap) * cell;
+    auto& active = scratch.active;
+    active.assign(plane.cellCount(), 0);
     // Cells within one of a non-empty cell: wherever a segment can cross within a radius of
     // one of the plane's discs.
     for (std::uint32_t row = 1; row + 1 < plane.rows; ++row)
@@ -221,7 +230,6 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
     auto& above = scratch.above;
     auto& here = scratch.here;
     above.clear();
-    const auto planeIndex = std::uint32_t(out.planes.size());
     const std::size_t firstRectangle = out.rectangles.size();
     for (std::uint32_t row = 0; row < plane.rows; ++row) {
         here.clear();
@@ -260,10 +268,6 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
     // them whatever Embree's rounding (its triangle test is not watertight). Triangle 2i and
     // 2i + 1 are rectangle i's.
     const auto vertex = [&](glm::dvec2 p) {
-        if (plane.tilted)
-            return glm::vec4(
-                glm::vec3(plane.offset * plane.unitNormal + p.x * plane.uAxis + p.y * plane.vAxis),
-                0.f);
         glm::vec4 q(0.f);
         q[plane.axis] = plane.coordinate;
         q[plane.u] = float(p.x);
@@ -284,22 +288,45 @@ bool DiscIndex::addPlane(Plane plane, std::span<const std::uint32_t> discs,
         out.patchTriangles.emplace_back(base, base + 1, base + 2);
         out.patchTriangles.emplace_back(base + 3, base + 4, base + 5);
     }
-    out.planes.push_back(plane);
-    return true;
 }
 
 void DiscIndex::makeLayout(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
                            float radius, Layout& out, Scratch& scratch) {
-    groupDiscs(centers, normals, radius, true, out, scratch);
-    // Tilted planes pay only where they leave Embree out; elsewhere their discs stay points.
-    out.direct = out.pointIds.empty() && out.planes.size() <= kMaxDirectPlanes;
-    if (!out.direct &&
-        std::any_of(out.planes.begin(), out.planes.end(), [](const Plane& p) { return p.tilted; }))
-        groupDiscs(centers, normals, radius, false, out, scratch);
+    groupDiscs(centers, normals, radius, out, scratch);
+    out.direct = out.cellDiscs.size() == centers.size() && out.planes.size() <= kMaxDirectPlanes;
+    if (!out.direct) {
+        // Tilted planes pay only where they leave Embree out; elsewhere their discs stay
+        // points. They come after the exact ones: drop them, their cells and their discs.
+        const auto tilted = std::find_if(out.planes.begin(), out.planes.end(),
+                                         [](const Plane& p) { return p.tilted; });
+        if (tilted != out.planes.end()) {
+            out.cellStart.resize(tilted->firstCell + 1);
+            const std::size_t kept = out.cellStart.back();
+            out.cellDiscs.resize(kept);
+            out.cellCenters.resize(kept);
+            out.cellNormals.resize(kept);
+            out.cellPoints.resize(kept);
+            out.planes.erase(tilted, out.planes.end());
+        }
+    }
+    auto& planar = scratch.planar;
+    planar.assign(centers.size(), 0);
+    for (const std::uint32_t disc : out.cellDiscs)
+        planar[disc] = 1;
+    for (std::uint32_t i = 0; i < centers.size(); ++i) {
+        if (planar[i]) continue;
+        out.pointIds.push_back(i);
+        out.pointDiscs.push_back(glm::vec4(centers[i], radius * kEmbreeWiden));
+        out.pointNormals.push_back(normals[i]);
+    }
+    out.pointNormals.push_back(glm::vec3(0.f)); // the padding
+    if (out.direct) return;                     // no Embree: no rectangles
+    for (std::uint32_t p = 0; p < out.planes.size(); ++p)
+        addRectangles(p, radius, out, scratch);
 }
 
 void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
-                           float radius, bool tilted, Layout& out, Scratch& scratch) {
+                           float radius, Layout& out, Scratch& scratch) {
     out.clear();
     auto& planar = scratch.planar;
     planar.assign(centers.size(), 0);
@@ -352,7 +379,7 @@ void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const g
     // straddles a step: then in two); within a group, a plane is a run of discs whose offsets
     // along the mean normal stay within the thickness allowed.
     keyed.clear();
-    for (std::uint32_t i = 0; tilted && i < centers.size(); ++i) {
+    for (std::uint32_t i = 0; i < centers.size(); ++i) {
         if (planar[i] || exactAxis(normals[i]) >= 0) continue;
         std::array<std::uint32_t, 4> key{0, 0, 0, 0};
         for (int a = 0; a < 3; ++a)
@@ -450,14 +477,6 @@ void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const g
             takeDiscs(firstCell);
         }
     }
-
-    for (std::uint32_t i = 0; i < centers.size(); ++i) {
-        if (planar[i]) continue;
-        out.pointIds.push_back(i);
-        out.pointDiscs.push_back(glm::vec4(centers[i], radius * kEmbreeWiden));
-        out.pointNormals.push_back(normals[i]);
-    }
-    out.pointNormals.push_back(glm::vec3(0.f)); // the padding
 }
 
 void DiscIndex::attachGeometries(RTCDevice device, RTCScene scene, Layout& layout,

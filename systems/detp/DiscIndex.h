@@ -206,18 +206,22 @@ private:
     struct Scratch;
 
     /// Fills `out` from the discs: planes (tilted ones only for a direct query), their grids
-    /// and rectangles, and the points left over.
+    /// and (for Embree) rectangles, and the points left over.
     static void makeLayout(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
                            float radius, Layout& out, Scratch& scratch);
-    /// makeLayout() with or without tilted planes; `out` is cleared first.
+    /// The planes of makeLayout(), exact ones first, then tilted ones, with their grids; `out`
+    /// is cleared first.
     static void groupDiscs(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
-                           float radius, bool tilted, Layout& out, Scratch& scratch);
-    /// Adds a plane holding `discs` (their (u, v) in `uv`) to `out`, with its grid and
-    /// rectangles; false (nothing added) when its grid would be too sparse or too large.
+                           float radius, Layout& out, Scratch& scratch);
+    /// Adds a plane holding `discs` (their (u, v) in `uv`) to `out`, with its grid; false
+    /// (nothing added) when its grid would be too sparse or too large.
     static bool addPlane(Plane plane, std::span<const std::uint32_t> discs,
                          std::span<const glm::dvec2> uv, std::span<const glm::vec3> centers,
                          std::span<const glm::vec3> normals, float radius, Layout& out,
                          Scratch& scratch);
+    /// Embree's rectangles (and their triangles) over plane `planeIndex`'s cells near a disc.
+    static void addRectangles(std::uint32_t planeIndex, float radius, Layout& out,
+                              Scratch& scratch);
     /// (u, v) of a point on (or near) the plane.
     static glm::dvec2 planeCoordinates(const Plane& plane, const glm::dvec3& x);
     /// An empty Embree scene built for the index's motion.
