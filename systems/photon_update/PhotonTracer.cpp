@@ -128,6 +128,8 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
     QGI_ASSERT(!ends.empty() && ends.back() == out.size(), "ends must end with out.size()");
     if (mBlocks.size() < roundBlocks) mBlocks.resize(roundBlocks);
     ends.reserve(ends.size() + count);
+    const std::size_t outStart = out.size();
+    std::vector<std::size_t> blockStart(roundBlocks + 1);
     for (std::size_t round = 0; round < count; round += blockPaths * roundBlocks) {
         const std::size_t roundEnd = std::min(count, round + blockPaths * roundBlocks);
         const std::size_t blocks = (roundEnd - round + blockPaths - 1) / blockPaths;
@@ -136,16 +138,27 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
             traceBlock(scene, surfaces, begin, std::min(roundEnd, begin + blockPaths), head,
                        mBlocks[b]);
         });
-        // Where each block's paths go, then the copies, block by block in parallel.
-        const std::size_t firstEnd = ends.size();
+        // Where each block's segments go (a serial sum over the blocks only), then each block's
+        // path ends and copy, in parallel.
+        blockStart[0] = out.size();
         for (std::size_t b = 0; b < blocks; ++b)
-            for (const std::uint32_t c : mBlocks[b].counts)
-                ends.push_back(ends.back() + c);
-        out.resize(ends.back());
+            blockStart[b + 1] = blockStart[b] + mBlocks[b].segments.size();
+        if (round == 0 && roundEnd < count) {
+            // Grow the output once, to the first round's segments per path times the paths
+            // and a sixteenth more, instead of doubling it (and copying it) along the way.
+            const double perPath = double(blockStart[blocks] - outStart) / double(roundEnd);
+            out.reserve(outStart + std::size_t(perPath * double(count) * (1.0 + 1.0 / 16.0)));
+        }
+        const std::size_t firstEnd = ends.size();
+        ends.resize(firstEnd + (roundEnd - round));
+        out.resize(blockStart[blocks]);
         tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
-            const PhotonSegments& packed = mBlocks[b].segments;
-            const std::size_t first = firstEnd + b * blockPaths;
-            out.copyFrom(ends[first - 1], packed, 0, packed.size());
+            const Block& block = mBlocks[b];
+            std::uint32_t end = std::uint32_t(blockStart[b]);
+            std::uint32_t* blockEnds = ends.data() + firstEnd + b * blockPaths;
+            for (std::size_t i = 0; i < block.counts.size(); ++i)
+                blockEnds[i] = end += block.counts[i];
+            out.copyFrom(blockStart[b], block.segments, 0, block.segments.size());
         });
     }
 }
