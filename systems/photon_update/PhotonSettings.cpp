@@ -9,9 +9,10 @@
 namespace qgi {
 namespace {
 
-// Segment indices are 32-bit (PhotonPath::first). Between compactions the store holds up to
-// (1 + compactionFraction) times the live segments plus one frame of re-traced paths, so the
-// worst case (every photon reaching maxBounces) must fit four times over.
+// Segment indices are 32-bit (PhotonPath::first). The store holds up to (1 + region room +
+// compactionFraction) times the live segments plus one frame of re-traced paths (under 2.5
+// times, PhotonStoreSpace), so the worst case (every photon reaching maxBounces) must fit four
+// times over.
 constexpr std::uint64_t kMaxStoredSegments = std::uint64_t(1) << 30;
 constexpr std::uint32_t kMaxBounces = 255; // PhotonSegments::bounce is 8 bits
 constexpr std::uint32_t kMaxGridResolution = 128;

@@ -31,8 +31,10 @@ struct PhotonSettings {
     /// chunks, those with the most re-traced paths first); until then a re-traced path is
     /// found by its bounding box.
     std::uint32_t gridRefreshBudget = 4096;
-    /// The store is compacted when its garbage segments (left by re-traced paths that no longer
-    /// fit their old range) exceed this fraction of the live ones.
+    /// The store is laid out anew (every segment copied once) when its overflow exceeds this
+    /// fraction of the live segments: re-traced paths that outgrew their store region's room,
+    /// and what they left there. Garbage inside the regions is reclaimed a few regions a frame
+    /// (PhotonStoreSpace), so this happens only when paths grow on the whole.
     float compactionFraction = 0.5f;
     /// A segment that hit a mobile which has only translated since (the common case of an
     /// object pushed or sliding) is tested again: when the mobile at its new pose still meets

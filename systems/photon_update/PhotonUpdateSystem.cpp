@@ -193,12 +193,6 @@ PhotonUpdateSystem::PhotonUpdateSystem(const PhotonSettings& settings) : mSettin
     validatePhotonSettings(settings);
 }
 
-std::size_t PhotonUpdateSystem::capacityFor(std::size_t live) const {
-    // The garbage allowed before compaction, and an eighth more for the frame that passes
-    // it: appending re-traced paths must not reallocate (and so copy) the whole store.
-    return std::size_t(double(live) * (1.125 + mSettings.compactionFraction));
-}
-
 PhotonTracer::Surfaces PhotonUpdateSystem::surfaces() const {
     return {mSettings.seed, mSettings.maxBounces, mAlbedo};
 }
@@ -244,14 +238,12 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         retrace(*scene, store, delta);
     }
     const StageTimer timer(profiler, "grid", mStats.gridMs);
-    if (!mJobs.empty()) {
-        grid.markChanged(store, delta.paths);
-        const std::size_t live = store.segments.size() - mGarbage;
-        if (double(mGarbage) > double(mSettings.compactionFraction) * double(live)) {
-            compact(store);
-            mStats.compacted = true;
-        }
-    }
+    if (!mJobs.empty()) grid.markChanged(store, delta.paths);
+    // A little of the garbage re-traced paths left, every frame (PhotonStoreSpace).
+    const PhotonStoreSpace::Reclaimed reclaimed =
+        mSpace.reclaim(store, double(mSettings.compactionFraction));
+    mStats.compacted = reclaimed.laidOut;
+    mStats.compactedRegions = reclaimed.regions;
     // Also on still frames: the index catches up with earlier changes. While few paths are
     // changed it idles: queries scan their boxes cheaply, and paths near a moving mobile
     // would change again anyway.
@@ -467,19 +459,24 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         store.paths[i].first = mEnds[i];
         store.paths[i].count = std::uint16_t(mEnds[i + 1] - mEnds[i]);
     }
-    store.segments.reserve(capacityFor(store.segments.size()));
-    mGarbage = 0;
+    const std::size_t traced = store.segments.size();
+    if (mSettings.fullRecompute) { // re-shot every frame: no room for re-traced paths needed
+        mSpace.clear();
+    } else {
+        mSpace.layOut(store, double(mSettings.compactionFraction));
+    }
     mReshooting.assign((store.paths.size() + 63) / 64, 0);
     grid.build(store, mSceneBox, mSettings.gridResolution);
-    mStats.tracedSegments = store.segments.size();
+    mStats.tracedSegments = traced;
     mStats.reindexedPaths = store.paths.size();
     if (!mLoggedShot) { // --full-recompute shoots every frame: once is enough
         mLoggedShot = true;
         constexpr double kMiB = 1024.0 * 1024.0;
-        logInfo("photons: ", store.paths.size(), " from ", mEmitters.size(), " lights, ",
-                store.segments.size(), " segments: store ",
+        logInfo("photons: ", store.paths.size(), " from ", mEmitters.size(), " lights, ", traced,
+                " segments: store ",
                 double(store.segments.size() * PhotonSegments::kBytesPerSegment) / kMiB,
-                " MiB, path grid ", double(grid.memoryBytes()) / kMiB, " MiB");
+                " MiB (with room for re-traced paths), path grid ",
+                double(grid.memoryBytes()) / kMiB, " MiB");
     }
 }
 
@@ -720,20 +717,12 @@ void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, Phot
     mStats.tracedSegments = delta.newSegments.size();
 
     // A path that still fits its range is rewritten in place (its tail, if shorter, becomes
-    // garbage); a longer one moves to the end of the store.
+    // garbage); a longer one moves to its region's free room or the overflow (PhotonStoreSpace).
     mWrite.resize(n);
     std::size_t end = store.segments.size();
     for (std::size_t i = 0; i < n; ++i) {
-        const PhotonPath& path = store.paths[mJobs[i].path];
         const std::size_t count = mJobs[i].k + delta.newFirst[i + 1] - delta.newFirst[i];
-        if (count <= path.count) {
-            mWrite[i] = path.first;
-            mGarbage += path.count - count;
-        } else {
-            mWrite[i] = end;
-            end += count;
-            mGarbage += path.count;
-        }
+        mWrite[i] = mSpace.place(store, mJobs[i].path, count, end);
     }
     store.segments.resize(end);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kCopyGrain),
@@ -750,27 +739,6 @@ void PhotonUpdateSystem::retrace(const RayScene& scene, PhotonStore& store, Phot
                               path.count = std::uint16_t(k + suffix);
                           }
                       });
-}
-
-void PhotonUpdateSystem::compact(PhotonStore& store) {
-    const std::size_t paths = store.paths.size();
-    mEnds.resize(paths + 1);
-    mEnds[0] = 0;
-    for (std::size_t p = 0; p < paths; ++p)
-        mEnds[p + 1] = mEnds[p] + store.paths[p].count;
-    PhotonSegments packed;
-    packed.reserve(capacityFor(mEnds[paths]));
-    packed.resize(mEnds[paths]);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, paths, kCopyGrain),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                          for (std::size_t p = range.begin(); p < range.end(); ++p) {
-                              PhotonPath& path = store.paths[p];
-                              packed.copyFrom(mEnds[p], store.segments, path.first, path.count);
-                              path.first = mEnds[p];
-                          }
-                      });
-    store.segments = std::move(packed);
-    mGarbage = 0;
 }
 
 } // namespace qgi

@@ -7,6 +7,7 @@
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonEmitter.h"
 #include "systems/photon_update/PhotonSettings.h"
+#include "systems/photon_update/PhotonStoreSpace.h"
 #include "systems/photon_update/PhotonTracer.h"
 
 #include <glm/mat4x4.hpp>
@@ -52,9 +53,9 @@ class PhotonPathGrid;
  *  needs a new RayScene and a new system. So is the box directional lights cover
  *  (PhotonSettings::directionalBounds; by default the scene's bounds and the scripted paths of
  *  mobiles with a PathFollower); a mobile that leaves it is named in a warning, once.
- *  A re-traced path is rewritten in place when it fits, else appended; the store is compacted
- *  when its garbage passes compactionFraction. The grid is told which paths changed and
- *  re-indexes up to gridRefreshBudget paths a frame.
+ *  A re-traced path is rewritten in place when it fits, else moved to its store region's free
+ *  room or the overflow; a few regions are compacted every frame (PhotonStoreSpace). The grid is
+ * told which paths changed and re-indexes up to gridRefreshBudget paths a frame.
  *
  *  Every random choice comes from PhotonSettings::seed (FrameContext::seed is not read: the
  *  ray set must not change when only the frame does).
@@ -78,7 +79,8 @@ public:
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
-        bool compacted = false;
+        bool compacted = false;         ///< the whole store laid out again
+        std::size_t compactedRegions = 0; ///< store regions compacted (PhotonStoreSpace)
         // Wall-clock milliseconds of the frame's stages (for the profile and benchmarks).
         double findMs = 0;  ///< candidate paths from the grid, exact segment tests
         double traceMs = 0; ///< re-tracing suffixes, writing the store and the delta
@@ -92,8 +94,8 @@ public:
 
     const PhotonSettings& settings() const { return mSettings; }
     const FrameStats& lastFrame() const { return mStats; }
-    /// Store segments no path refers to.
-    std::size_t garbageSegments() const { return mGarbage; }
+    /// Where the store's paths live (its regions, garbage and overflow).
+    const PhotonStoreSpace& storeSpace() const { return mSpace; }
 
 private:
     struct Mobile {
@@ -189,11 +191,8 @@ private:
     bool lands(const RayScene& scene, const PhotonSegments& segments, std::size_t s,
                const MovedMobile& mobile, float tolerance, std::uint32_t& primitive) const;
     void retrace(const RayScene& scene, PhotonStore& store, PhotonDelta& delta);
-    void compact(PhotonStore& store);
     /// Whether a directional light has photons in the store.
     bool litByDirectionalLight() const;
-    /// Store capacity for `live` segments.
-    std::size_t capacityFor(std::size_t live) const;
     PhotonTracer::Surfaces surfaces() const;
 
     PhotonSettings mSettings;
@@ -207,7 +206,7 @@ private:
     std::vector<glm::vec3> mAlbedo;       ///< by Entity::index, as shot
     std::vector<Mobile> mMobiles;
     std::unordered_map<Entity, std::size_t> mMobileIndex;
-    std::size_t mGarbage = 0;
+    PhotonStoreSpace mSpace;
     FrameStats mStats;
 
     // Per-frame working memory, kept to reuse its capacity.
