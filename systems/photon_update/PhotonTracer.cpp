@@ -61,13 +61,15 @@ void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, s
     s.hits.resize(n);
     out.counts.assign(n, 0);
     if (s.slots.size() < n * slotsPerPath) s.slots.resize(n * slotsPerPath);
+    // A photon that carries no power (its light is dark) is not traced: its path is empty.
+    std::size_t live = 0;
     for (std::size_t i = 0; i < n; ++i) {
         s.state[i] = head(begin + i);
-        s.active[i] = std::uint32_t(i);
+        const glm::vec3& power = s.state[i].power;
+        if (power.x > 0.f || power.y > 0.f || power.z > 0.f) s.active[live++] = std::uint32_t(i);
     }
 
     PhotonSegments& slots = s.slots;
-    std::size_t live = n;
     while (live > 0) {
         for (std::size_t j = 0; j < live; ++j) {
             const PhotonHead& h = s.state[s.active[j]];

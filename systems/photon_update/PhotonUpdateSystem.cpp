@@ -287,10 +287,11 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
         edited.firstPhoton = shot.firstPhoton;
         edited.photonCount = shot.photonCount;
         prepareEmitter(registry, mDirectionalBox, edited);
-        // A light turning on or off changes how photons are shared, and a surface moving to or
-        // from a stand-in changes what hybrid mode counts: shoot everything anew.
-        if (shines(edited.power) != shines(shot.power) || edited.directDrawn != shot.directDrawn)
-            return true;
+        // A surface moving to or from a stand-in changes what hybrid mode counts: shoot
+        // everything anew. A light switched off keeps its photons, re-shot empty (they carry
+        // nothing), for when it shines again; one that lights up without photons of its own
+        // needs a share of them (sharesDrifted).
+        if (edited.directDrawn != shot.directDrawn) return true;
         shot = std::move(edited);
         mSweeps[i].remaining = shot.photonCount;
         store.lights[i].power = shot.power;
@@ -310,12 +311,16 @@ bool PhotonUpdateSystem::sharesDrifted() const {
     // photon than the rest (noisier, not biased), and one that lit up from next to nothing may
     // have no photons at all (its light would be missing). Each light's count is compared with
     // its exact share of the photons now; a share under one photon is no share to keep.
+    // Lights switched off are left out: their photons wait for them, and the lights still on
+    // keep their shares of each other.
     double total = 0.0, photons = 0.0;
     for (const PhotonEmitter& e : mEmitters) {
+        if (!shines(e.power)) continue;
         total += double(e.power.x) + e.power.y + e.power.z;
         photons += e.photonCount;
     }
-    if (!(total > 0.0) || !(photons > 0.0)) return false;
+    if (!(total > 0.0)) return false;  // all dark: nothing to share
+    if (!(photons > 0.0)) return true; // lights on, none with photons of its own
     for (const PhotonEmitter& e : mEmitters) {
         const double share = photons * (double(e.power.x) + e.power.y + e.power.z) / total;
         if (share < 1.0) continue;

@@ -28,10 +28,11 @@ class PhotonPathGrid;
 /** Keeps the photon ray set in step with the scene every frame (seed 000 sections 2.2-2.3,
  *  with seed 004's emission, frame-coherent seeding and progressive refinement).
  *
- *  Full shot (first frame; a light turned on or off, added or removed; a light whose power
- *  drifted since the last full shot until its photon count is 4x above or below its share of
- *  the photons (a share of one photon or more); an emissive surface gaining or losing its
- *  light stand-in; a surface's albedo edited; every frame with fullRecompute):
+ *  Full shot (first frame; a light added or removed; a light whose power drifted since the
+ *  last full shot until its photon count is 4x above or below its share of the lit lights'
+ *  photons (a share of one photon or more), which includes one lighting up without photons;
+ *  an emissive surface gaining or losing its light stand-in; a surface's albedo edited; every
+ *  frame with fullRecompute):
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built; PhotonDelta::full.
  *
@@ -47,7 +48,10 @@ class PhotonPathGrid;
  *     until each has been re-shot once since its last change; the delta reports each one with
  *     its whole old and new path. Until then the light's photons mix old and new shots (a
  *     light that moves every frame shows a smear over its last photons / reshootBudget
- *     frames).
+ *     frames). A punctual light switched off (intensity 0) is such a change: its photons carry
+ *     nothing, so they are re-shot empty (no segments) and wait, with their indices, for it
+ *     to shine again; the lights still on keep their photons. An emissive surface whose
+ *     emission goes to 0 stops being a light: a full shot.
  *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
  *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
  *  needs a new RayScene and a new system. So is the box directional lights cover

@@ -994,6 +994,91 @@ TEST(PhotonUpdate, AMovedLightIsReshotWithinTheBudgetUntilItMatchesAFullShot) {
     EXPECT_TRUE(sameStore(store, storeOf(fresh)));
 }
 
+TEST(PhotonUpdate, ALightSwitchedOffAndOnIsReshotWithinTheBudget) {
+    // A light switched off keeps its photons, re-shot empty within the budget (no full shot,
+    // no frame paying for all of them); switched on again, they are re-shot from it and the
+    // store is again the one a full shot gives. The other light's paths are never touched.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const float intensity = registry.get<PointLight>(room.light).intensity;
+    const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, intensity);
+    buildRayScene(registry);
+    PhotonSettings settings = settingsWith(10'000);
+    settings.reshootBudget = 3'000;
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore shot = storeOf(registry);
+    ASSERT_EQ(shot.lights.size(), 2u);
+    ASSERT_EQ(shot.lights[1].photonCount, 5'000u);
+    const std::uint32_t first = 5'000; // the lamp's photons: [5000, 10000)
+
+    // Frames until the sweep is done: each re-shoots at most the budget, lamp photons only,
+    // each once; returns how many each frame re-shot.
+    std::uint64_t frame = 0;
+    const auto sweep = [&](bool on) {
+        std::vector<std::size_t> perFrame;
+        std::vector<bool> seen(10'000, false);
+        for (int i = 0; i < 4; ++i) {
+            const PhotonStore before = storeOf(registry);
+            system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+            registry.clearChanges();
+            const PhotonDelta& delta = deltaOf(registry);
+            const PhotonStore& after = storeOf(registry);
+            EXPECT_FALSE(delta.full);
+            perFrame.push_back(delta.paths.size());
+            for (std::size_t j = 0; j < delta.paths.size(); ++j) {
+                const std::uint32_t p = delta.paths[j];
+                EXPECT_GE(p, first);
+                EXPECT_FALSE(seen[p]) << "photon " << p << " re-shot twice";
+                seen[p] = true;
+                EXPECT_EQ(delta.oldFirst[j + 1] - delta.oldFirst[j], before.paths[p].count);
+                EXPECT_EQ(delta.newFirst[j + 1] - delta.newFirst[j], after.paths[p].count);
+                EXPECT_EQ(after.paths[p].count > 0, on) << "photon " << p;
+            }
+        }
+        return perFrame;
+    };
+
+    registry.patch<PointLight>(lamp).intensity = 0.f;
+    EXPECT_EQ(sweep(false), (std::vector<std::size_t>{3'000, 2'000, 0, 0}));
+    const PhotonStore& dark = storeOf(registry);
+    EXPECT_EQ(dark.lights[1].power, glm::vec3(0.f));
+    EXPECT_EQ(dark.emittedPower, shot.lights[0].power);
+    for (std::uint32_t p = 0; p < 10'000; ++p) {
+        if (p >= first) {
+            ASSERT_EQ(dark.paths[p].count, 0u) << "photon " << p;
+            continue;
+        }
+        ASSERT_EQ(dark.paths[p].count, shot.paths[p].count);
+        for (std::uint32_t k = 0; k < shot.paths[p].count; ++k)
+            ASSERT_TRUE(test::sameSegment(dark.segments, dark.paths[p].first + k, shot.segments,
+                                          shot.paths[p].first + k));
+    }
+
+    registry.patch<PointLight>(lamp).intensity = intensity;
+    EXPECT_EQ(sweep(true), (std::vector<std::size_t>{3'000, 2'000, 0, 0}));
+    EXPECT_TRUE(sameStore(storeOf(registry), shot));
+    EXPECT_EQ(storeOf(registry).emittedPower, shot.emittedPower);
+}
+
+TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
+    // The only light with photons switched off, and one shot without photons switched on: no
+    // light that shines has photons, so they are shared anew.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 0.f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(4'000));
+    firstUpdate(registry, system);
+    ASSERT_EQ(storeOf(registry).lights[1].photonCount, 0u);
+    registry.patch<PointLight>(lamp).intensity = registry.get<PointLight>(room.light).intensity;
+    registry.patch<PointLight>(room.light).intensity = 0.f;
+    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+    EXPECT_TRUE(deltaOf(registry).full);
+    EXPECT_EQ(storeOf(registry).lights[0].photonCount, 0u);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 4'000u);
+}
+
 TEST(PhotonUpdate, AddingALightShootsEverythingAnew) {
     Registry registry;
     buildRoom(registry, kCubeRest, kCrateRest);
