@@ -73,7 +73,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     CLI::App app{"qgi-demo: walkthrough of a quasi-static scene lit by the qgi runtime.\n"
                  "Interactive: WASD + right mouse drag to fly, Q/E down/up, Shift faster,\n"
                  "Tab selects the next mobile, arrow keys and PageUp/PageDown move it,\n"
-                 "H takes it out of the world and puts it back,\n"
+                 "H takes it out of the world and puts it back, L switches the lamps off and on,\n"
                  "C hands the camera back to the scripted path, P toggles the point-set view,\n"
                  "F12 takes a screenshot, Esc quits.",
                  "qgi-demo"};

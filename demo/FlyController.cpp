@@ -5,6 +5,8 @@
 #include "components/MobileMesh.h"
 #include "components/Name.h"
 #include "components/PathFollower.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/Transform.h"
 #include "runtime/core/Log.h"
 #include "runtime/scene/SceneQueries.h"
@@ -68,6 +70,27 @@ void FlyController::toggleSelectedMobile(Registry& registry) {
             name ? name->value : std::to_string(mSelectedMobile.index));
 }
 
+void FlyController::switchLamps(Registry& registry) {
+    // Off: each lamp's intensity kept and set to 0; on: the kept intensities back. The photon
+    // update re-shoots a switched lamp's photons within its budget, so the light it gave
+    // others fades instead of every photon being shot again in one frame.
+    mLampsOff = !mLampsOff;
+    const auto lamp = [&](Entity e, float& intensity) {
+        if (mLampsOff) {
+            mLampIntensity[e] = intensity;
+            intensity = 0.f;
+        } else if (const auto it = mLampIntensity.find(e); it != mLampIntensity.end()) {
+            intensity = it->second;
+        }
+    };
+    for (const Entity e : registry.view<const PointLight>().entities())
+        lamp(e, registry.patch<PointLight>(e).intensity);
+    for (const Entity e : registry.view<const SpotLight>().entities())
+        lamp(e, registry.patch<SpotLight>(e).intensity);
+    if (!mLampsOff) mLampIntensity.clear();
+    logInfo(mLampsOff ? "lamps off" : "lamps on");
+}
+
 void FlyController::update(Registry& registry, const FrameContext& frame) {
     const float dt = std::min(frame.dt, 0.1f);
 
@@ -77,6 +100,9 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
     const bool h = pressed(mWindow, GLFW_KEY_H);
     if (h && !mHDown) toggleSelectedMobile(registry);
     mHDown = h;
+    const bool l = pressed(mWindow, GLFW_KEY_L);
+    if (l && !mLDown) switchLamps(registry);
+    mLDown = l;
 
     const Entity camera = findActiveCamera(registry);
     if (!camera || !registry.has<Transform>(camera)) return;

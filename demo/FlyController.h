@@ -5,6 +5,7 @@
 #include "runtime/ecs/Registry.h"
 
 #include <optional>
+#include <unordered_map>
 
 struct GLFWwindow;
 
@@ -12,13 +13,13 @@ namespace qgi::demo {
 
 /** Interactive input: a fly camera (WASD + right-mouse look, Q/E down/up, Shift faster) and
  *  keyboard moves of the selected mobile (Tab selects, arrows and PageUp/PageDown move, H
- *  takes it out of the world and puts it back). Taking the camera stops its scripted path; C
- *  gives it back.
+ *  takes it out of the world and puts it back), and L switching the lamps (point and spot
+ *  lights) off and on. Taking the camera stops its scripted path; C gives it back.
  *  Reads:  GLFW key and mouse state
  *  A glTF node whose primitives are several mobile meshes is selected, moved and switched as
  *  one.
  *  Writes: Transform of the active camera and of the selected mobile, MobileMesh::active of
- *          the selected mobile's meshes (patched)                                        */
+ *          the selected mobile's meshes, PointLight and SpotLight intensity (patched) */
 class FlyController {
 public:
     explicit FlyController(GLFWwindow* window) : mWindow(window) {}
@@ -28,13 +29,17 @@ private:
     void selectNextMobile(Registry& registry);
     /// Takes the selected mobile out of the world (MobileMesh::active), or puts it back.
     void toggleSelectedMobile(Registry& registry);
+    /// Switches every point and spot light off (intensity 0), or back to what it was.
+    void switchLamps(Registry& registry);
 
     GLFWwindow* mWindow;
     Entity mSelectedMobile{};
     bool mLooking = false;
     double mLastX = 0, mLastY = 0;
     float mYaw = 0.f, mPitch = 0.f; ///< radians
-    bool mTabDown = false, mCDown = false, mHDown = false;
+    bool mTabDown = false, mCDown = false, mHDown = false, mLDown = false;
+    bool mLampsOff = false;
+    std::unordered_map<Entity, float> mLampIntensity; ///< while off: each lamp's intensity
     bool mCameraTaken = false;
     std::optional<PathFollower> mStashedPath; ///< the camera's script while the player flies
 };
