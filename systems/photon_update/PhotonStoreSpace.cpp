@@ -39,6 +39,7 @@ void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
     mLive = 0;
     for (Region& region : mRegions) {
         const std::size_t live = region.cursor;
+        region.live = live;
         region.room = std::max(kMinRoom, std::size_t(std::ceil(double(live) * kRegionSlack)));
         region.begin = at;
         region.cursor = at + live;
@@ -80,6 +81,11 @@ std::size_t PhotonStoreSpace::place(const PhotonStore& store, std::uint32_t path
     const PhotonPath& old = store.paths[path];
     Region& region = mRegions[regionOf(path)];
     mLive = mLive + count - old.count;
+    region.live = region.live + count - old.count;
+    if (count == 0) { // an empty path (a dark light's photon) points at its region's start,
+        release(region, old, old.count); // never past the store's end
+        return region.begin;
+    }
     if (count <= old.count) { // rewritten in place; a shorter path leaves its tail
         release(region, old, old.count - count);
         return old.first;
@@ -102,15 +108,14 @@ std::size_t PhotonStoreSpace::compactRegion(PhotonStore& store, std::size_t r,
     Region& region = mRegions[r];
     const std::size_t first = r * mRegionPaths;
     const std::size_t last = std::min(store.paths.size(), first + mRegionPaths);
-    std::size_t live = 0;
-    for (std::size_t p = first; p < last; ++p)
-        live += store.paths[p].count;
+    const std::size_t live = region.live;
     if (live > region.end - region.begin) return kNotPacked; // its paths grew past its span
 
     // Paths already packed from the span's start stay; the rest go out to the scratch buffer
     // (from the span or the overflow) and back in path order.
     std::size_t moveFrom = first, to = region.begin;
-    while (moveFrom < last && store.paths[moveFrom].first == to)
+    while (moveFrom < last &&
+           (store.paths[moveFrom].first == to || store.paths[moveFrom].count == 0))
         to += store.paths[moveFrom++].count;
     const std::size_t start = to;
     scratch.resize(region.begin + live - start);
@@ -120,6 +125,8 @@ std::size_t PhotonStoreSpace::compactRegion(PhotonStore& store, std::size_t r,
         scratch.copyFrom(at, store.segments, path.first, path.count);
         at += path.count;
     }
+    QGI_ASSERT(start + at == region.begin + live, "region ", r, " has ", start + at - region.begin,
+               " live segments, its count says ", live);
     store.segments.copyFrom(start, scratch, 0, at);
     for (std::size_t p = moveFrom; p < last; ++p) {
         store.paths[p].first = std::uint32_t(to);
@@ -149,6 +156,7 @@ PhotonStoreSpace::Reclaimed PhotonStoreSpace::reclaim(PhotonStore& store, double
     for (std::size_t r = 0; r < mRegions.size(); ++r) {
         const Region& region = mRegions[r];
         largest = std::max(largest, region.end - region.begin);
+        if (region.live > region.end - region.begin) continue; // cannot be packed in place
         if (2 * reclaimable(region) >= region.room || (drainOverflow && region.overflowed > 0))
             mOrder.push_back(r);
     }

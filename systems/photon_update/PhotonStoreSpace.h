@@ -70,6 +70,7 @@ private:
         std::size_t room = 0;           ///< room to grow it was laid out with
         std::size_t garbage = 0;        ///< segments in [begin, cursor) no path refers to
         std::size_t overflowed = 0;     ///< live segments of its paths in the overflow
+        std::size_t live = 0;           ///< live segments of its paths, wherever they are
     };
     std::size_t regionOf(std::uint32_t path) const { return path / mRegionPaths; }
     std::size_t reclaimable(const Region& r) const { return r.garbage + r.overflowed; }

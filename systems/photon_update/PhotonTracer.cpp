@@ -61,12 +61,15 @@ void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, s
     s.hits.resize(n);
     out.counts.assign(n, 0);
     if (s.slots.size() < n * slotsPerPath) s.slots.resize(n * slotsPerPath);
-    // A photon that carries no power (its light is dark) is not traced: its path is empty.
+    // A photon that leaves its light with no power (the light is dark) is not traced: its path
+    // is empty. Later in a path power may drop to zero (a red photon on a green wall); such
+    // a path is traced on as it always was, so that a re-traced suffix matches a fresh shot.
     std::size_t live = 0;
     for (std::size_t i = 0; i < n; ++i) {
         s.state[i] = head(begin + i);
-        const glm::vec3& power = s.state[i].power;
-        if (power.x > 0.f || power.y > 0.f || power.z > 0.f) s.active[live++] = std::uint32_t(i);
+        const PhotonHead& h = s.state[i];
+        const bool dark = h.bounce == 0 && !(h.power.x > 0.f || h.power.y > 0.f || h.power.z > 0.f);
+        if (!dark) s.active[live++] = std::uint32_t(i);
     }
 
     PhotonSegments& slots = s.slots;

@@ -28,8 +28,8 @@ class RayScene;
  *  channel keeps its power (photons of near-equal power). A survivor leaves in a
  *  cosine-weighted direction about the geometric normal turned to the side it came from.
  *  A ray that hits nothing is stored with length +inf and ends the path; so does the hit after
- *  the last allowed bounce. A photon that carries no power (a light switched off) is not
- *  traced at all: its path has no segments.
+ *  the last allowed bounce. A photon that leaves its light with no power (a light switched
+ *  off) is not traced at all: its path has no segments.
  *
  *  The decisions at bounce b of photon i use photon::hashUniform of (seed, i, b, 0..2) only,
  *  so re-tracing a path from any stored segment through unchanged geometry reproduces the

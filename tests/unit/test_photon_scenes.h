@@ -123,4 +123,17 @@ inline ::testing::AssertionResult sameStore(const PhotonStore& a, const PhotonSt
     return ::testing::AssertionSuccess();
 }
 
+/// The stores keep every path at the same place, in stores of the same size (what lies
+/// between paths, room for re-traced ones, is not compared: it holds nothing).
+inline ::testing::AssertionResult sameLayout(const PhotonStore& a, const PhotonStore& b) {
+    if (a.segments.size() != b.segments.size())
+        return ::testing::AssertionFailure()
+               << a.segments.size() << " vs " << b.segments.size() << " segments";
+    for (std::size_t p = 0; p < std::min(a.pathCount(), b.pathCount()); ++p)
+        if (a.paths[p].first != b.paths[p].first)
+            return ::testing::AssertionFailure() << "path " << p << " starts at "
+                                                 << a.paths[p].first << " vs " << b.paths[p].first;
+    return ::testing::AssertionSuccess();
+}
+
 } // namespace qgi::test

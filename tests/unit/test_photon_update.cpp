@@ -42,6 +42,7 @@ namespace {
 using test::buildRayScene;
 using test::buildRoom;
 using test::firstUpdate;
+using test::sameLayout;
 using test::sameSegment;
 using test::sameStore;
 using test::translation;
@@ -214,9 +215,7 @@ TEST(PhotonUpdate, SameSeedGivesABitIdenticalStoreAnotherSeedDoesNot) {
     EXPECT_TRUE(deltaOf(a).full);
     ASSERT_EQ(x.pathCount(), 20'000u);
     EXPECT_TRUE(sameStore(x, y));
-    ASSERT_EQ(x.segments.size(), y.segments.size()); // and the same layout
-    for (std::size_t s = 0; s < x.segments.size(); ++s)
-        ASSERT_TRUE(sameSegment(x.segments, s, y.segments, s));
+    EXPECT_TRUE(sameLayout(x, y));
     EXPECT_FALSE(sameStore(x, z));
 }
 
@@ -239,9 +238,7 @@ TEST(PhotonUpdate, TheStoreDoesNotDependOnTheThreadCount) {
     const PhotonStore& sixteen = *shoot(c, 16);
     for (const PhotonStore* other : {&all, &sixteen}) {
         EXPECT_TRUE(sameStore(one, *other));
-        ASSERT_EQ(one.segments.size(), other->segments.size());
-        for (std::size_t s = 0; s < one.segments.size(); ++s)
-            ASSERT_TRUE(sameSegment(one.segments, s, other->segments, s)) << "segment " << s;
+        EXPECT_TRUE(sameLayout(one, *other));
     }
 }
 
@@ -1055,10 +1052,80 @@ TEST(PhotonUpdate, ALightSwitchedOffAndOnIsReshotWithinTheBudget) {
                                           shot.paths[p].first + k));
     }
 
+    // A mobile moved while the lamp is dark re-traces only the lit light's paths (empty ones
+    // touch nothing), and back at its pose, the store is the shot's again.
+    const glm::mat4 away = translation(kCubeRest + glm::vec3(0.3f, 0.2f, 0.4f));
+    moveAll(registry, system, {{room.cube, away}}, ++frame);
+    ASSERT_FALSE(deltaOf(registry).paths.empty());
+    for (const std::uint32_t p : deltaOf(registry).paths)
+        EXPECT_LT(p, first) << "a dark lamp's empty path was re-traced";
+    moveAll(registry, system, {{room.cube, translation(kCubeRest)}}, ++frame);
+
     registry.patch<PointLight>(lamp).intensity = intensity;
     EXPECT_EQ(sweep(true), (std::vector<std::size_t>{3'000, 2'000, 0, 0}));
     EXPECT_TRUE(sameStore(storeOf(registry), shot));
     EXPECT_EQ(storeOf(registry).emittedPower, shot.emittedPower);
+}
+
+TEST(PhotonUpdate, AnEmissiveSurfaceThatCannotEmitGoesDarkWithoutAFullShot) {
+    // An emissive mobile whose emission turns invalid (or a surface scaled to nothing) keeps
+    // its place among the lights with no power: its photons are re-shot empty, and its
+    // triangles, gone, are never sampled.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    registry.get<Material>(room.crate).emission = glm::vec3(20.f);
+    buildRayScene(registry);
+    PhotonSettings settings = settingsWith(8'000);
+    settings.reshootBudget = 100'000;
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    ASSERT_EQ(storeOf(registry).lights.size(), 2u);
+    const PhotonLight crate = storeOf(registry).lights[1];
+    ASSERT_GT(crate.photonCount, 0u);
+
+    setLogLevel(LogLevel::Quiet); // the warning that the surface cannot emit
+    registry.patch<Material>(room.crate).emission = glm::vec3(-1.f);
+    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+    registry.clearChanges();
+    setLogLevel(LogLevel::Info);
+    EXPECT_FALSE(deltaOf(registry).full);
+    EXPECT_EQ(deltaOf(registry).paths.size(), crate.photonCount);
+    const PhotonStore& store = storeOf(registry);
+    for (std::uint32_t p = 0; p < store.pathCount(); ++p)
+        if (store.paths[p].light == 1) EXPECT_EQ(store.paths[p].count, 0u) << "photon " << p;
+}
+
+TEST(PhotonUpdate, ARedPhotonOnAGreenWallIsTracedOnWhenReTraced) {
+    // Power can drop to zero in a path (red light, green albedo): a fresh shot traces such a
+    // photon on, and a re-traced suffix must too (only photons that leave a light dark are
+    // not traced).
+    const auto build = [](Registry& r, const glm::mat4& cratePose) {
+        const test::Room room = buildRoom(r, kCubeRest, kCrateRest);
+        r.get<PointLight>(room.light).color = glm::vec3(1.f, 0.f, 0.f);
+        r.get<Material>(room.walls).baseColor = glm::vec3(0.f, 0.7f, 0.f);
+        r.get<WorldTransform>(room.crate).matrix = cratePose;
+        buildRayScene(r);
+        return room;
+    };
+    PhotonSettings settings = settingsWith(20'000);
+    settings.reuseLandedPaths = false; // the seed's rule: bit for bit a fresh shot
+    Registry registry;
+    const test::Room room = build(registry, translation(kCrateRest));
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    std::size_t dark = 0;
+    const PhotonStore& shot = storeOf(registry);
+    for (std::size_t s = 0; s < shot.segments.size(); ++s)
+        dark += shot.segments.bounce[s] > 0 && shot.segments.power[s] == glm::vec3(0.f) ? 1 : 0;
+    EXPECT_GT(dark, 1000u); // the case is exercised
+
+    const glm::mat4 moved = translation(kCrateRest + glm::vec3(0.3f, 0.5f, 0.3f));
+    moveAll(registry, system, {{room.crate, moved}}, 1);
+    Registry fresh;
+    build(fresh, moved);
+    PhotonUpdateSystem full(settings);
+    firstUpdate(fresh, full);
+    EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
 }
 
 TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
