@@ -1091,8 +1091,11 @@ TEST(PhotonUpdate, AnEmissiveSurfaceThatCannotEmitGoesDarkWithoutAFullShot) {
     EXPECT_FALSE(deltaOf(registry).full);
     EXPECT_EQ(deltaOf(registry).paths.size(), crate.photonCount);
     const PhotonStore& store = storeOf(registry);
-    for (std::uint32_t p = 0; p < store.pathCount(); ++p)
-        if (store.paths[p].light == 1) EXPECT_EQ(store.paths[p].count, 0u) << "photon " << p;
+    for (std::uint32_t p = 0; p < store.pathCount(); ++p) {
+        if (store.paths[p].light == 1) {
+            EXPECT_EQ(store.paths[p].count, 0u) << "photon " << p;
+        }
+    }
 }
 
 TEST(PhotonUpdate, ARedPhotonOnAGreenWallIsTracedOnWhenReTraced) {
