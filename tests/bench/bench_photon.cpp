@@ -12,8 +12,14 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
+//  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
+//    re-shot within the budget), mean and worst; against FullReshoot, what a switch cost when
+//    it shot every photon anew.
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/MobileMesh.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
@@ -96,6 +102,19 @@ struct PhotonWorld {
     }
 
     const PhotonStore& store() const { return registry.ctx().get<PhotonStore>(); }
+
+    /// One frame with nothing moved (what game code changed is already patched). Returns its
+    /// milliseconds, photon update and DETP.
+    double still() {
+        ++frame;
+        const auto start = std::chrono::steady_clock::now();
+        const FrameContext context{frame, 0.0, 0.f, 0};
+        system->update(registry, context);
+        irradiance->update(registry, context);
+        registry.clearChanges();
+        return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+            .count();
+    }
 
     /// Every mobile 1 cm further along x, turning back after 5 cm (or, with `toggle`, taken out
     /// of the world or put back: MobileMesh::active); then the frame's update. Returns the
@@ -248,6 +267,60 @@ void BM_MobileToggle(benchmark::State& state, const std::string& name) {
     if (w.frame % 2 == 1) w.step(true);
 }
 
+/// The lamps (point and spot lights that shoot photons) switched off, and on again once their
+/// photons have all been re-shot, over and over; the mobiles stay. Each frame is timed: the
+/// mean is the benchmark's time, the worst frame a counter. Before lights kept their photons
+/// when off, every switch was a full shot (FullReshoot's frame).
+void BM_LampSwitch(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    Registry& r = w.registry;
+    std::vector<Entity> points, spots;
+    for (const Entity e : r.view<const PointLight>().entities())
+        if (!r.has<LightStandIn>(e)) points.push_back(e);
+    for (const Entity e : r.view<const SpotLight>().entities())
+        if (!r.has<LightStandIn>(e)) spots.push_back(e);
+    std::vector<float> intensity;
+    for (const Entity e : points)
+        intensity.push_back(r.get<PointLight>(e).intensity);
+    for (const Entity e : spots)
+        intensity.push_back(r.get<SpotLight>(e).intensity);
+    std::uint64_t lampPhotons = 0;
+    for (const PhotonLight& light : w.store().lights)
+        if (r.has<PointLight>(light.entity) || r.has<SpotLight>(light.entity))
+            lampPhotons += light.photonCount;
+    const std::uint64_t budget = w.system->settings().reshootBudget;
+    const std::uint64_t period =
+        (lampPhotons + budget - 1) / budget + 1; // sweep, and a still frame
+    const auto switchLamps = [&](bool on) {
+        std::size_t i = 0;
+        for (const Entity e : points)
+            r.patch<PointLight>(e).intensity = on ? intensity[i++] : 0.f;
+        for (const Entity e : spots)
+            r.patch<SpotLight>(e).intensity = on ? intensity[i++] : 0.f;
+    };
+
+    double worst = 0, reshot = 0, fullShots = 0;
+    std::uint64_t frames = 0;
+    bool off = false;
+    for (auto _ : state) {
+        if (frames++ % period == 0) switchLamps(!(off = !off));
+        const double ms = w.still();
+        worst = std::max(worst, ms);
+        reshot += double(w.system->lastFrame().reshotPaths);
+        fullShots += w.system->lastFrame().full ? 1 : 0;
+        state.SetIterationTime(ms / 1000.0);
+    }
+    state.counters["lamp_photons"] = double(lampPhotons);
+    state.counters["frames_per_switch"] = double(period - 1);
+    state.counters["reshot/frame"] = reshot / double(frames);
+    state.counters["worst_frame_ms"] = worst;
+    state.counters["full_shots"] = fullShots;
+    // Lamps back on, and their photons with them, for the next benchmark on this world.
+    if (off) switchLamps(true);
+    for (std::uint64_t i = 0; i < period; ++i)
+        w.still();
+}
+
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
@@ -322,6 +395,12 @@ int main(int argc, char** argv) {
             ->Arg(0)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
+        // The atrium's lamps switched off and on (the cornell box has none that shoot photons:
+        // its luminaire is an emissive surface).
+        if (scene == "atrium")
+            RegisterBenchmark(id("LampSwitch").c_str(), BM_LampSwitch, scene)
+                ->UseManualTime()
+                ->Unit(benchmark::kMillisecond);
     }
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
