@@ -10,6 +10,7 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 namespace qgi {
@@ -79,11 +80,13 @@ struct PhotonEmitter {
 };
 
 /// Appends the sources of every light the settings enable, in a fixed order (point, spot,
-/// directional, then emissive meshes, each in registry order; an emissive mobile out of the
-/// world, MobileMesh::active false, is none); fields other than the source ones keep their
-/// defaults. Reads only components: cheap enough for every frame.
+/// directional, then emissive meshes, each in registry order); fields other than the source
+/// ones keep their defaults. A mesh that emits nothing, or an emissive mobile out of the world
+/// (MobileMesh::active false), is a source only when it is among `shot` (the lights the photons
+/// were shot from): then a dark one, its radiance 0, so that its photons wait for it. Reads only
+/// components: cheap enough for every frame.
 void findEmitterSources(const Registry& registry, const PhotonSettings& settings,
-                        std::vector<PhotonEmitter>& out);
+                        std::vector<PhotonEmitter>& out, std::span<const PhotonEmitter> shot = {});
 
 /// Derives power and sampling data from the source; `sceneBox` bounds what a directional light
 /// must cover. A light with a non-finite, negative or out-of-range value gets power 0 and a

@@ -212,7 +212,7 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     mStats = {};
 
     mSources.clear();
-    findEmitterSources(registry, mSettings, mSources);
+    findEmitterSources(registry, mSettings, mSources, mEmitters);
     if (mShot) findMovedMobiles(registry, *scene, delta);
     if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store) ||
         albedoChanged(registry)) {

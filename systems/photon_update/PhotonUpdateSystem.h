@@ -48,10 +48,10 @@ class PhotonPathGrid;
  *     until each has been re-shot once since its last change; the delta reports each one with
  *     its whole old and new path. Until then the light's photons mix old and new shots (a
  *     light that moves every frame shows a smear over its last photons / reshootBudget
- *     frames). A punctual light switched off (intensity 0) is such a change: its photons carry
- *     nothing, so they are re-shot empty (no segments) and wait, with their indices, for it
- *     to shine again; the lights still on keep their photons. An emissive surface whose
- *     emission goes to 0 stops being a light: a full shot.
+ *     frames). A light switched off (a punctual light's intensity or a surface's emission
+ *     set to 0, an emissive mobile taken out of the world) is such a change: its photons
+ *     carry nothing, so they are re-shot empty (no segments) and wait, with their indices,
+ *     for it to shine again; the lights still on keep their photons.
  *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
  *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
  *  needs a new RayScene and a new system. So is the box directional lights cover

@@ -606,35 +606,6 @@ INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
                              return std::string(irradianceEstimatorName(test.param));
                          });
 
-TEST(PhotonUpdate, AnEmissiveMobileTakenOutStopsShiningAndPutBackShinesAgain) {
-    Registry registry;
-    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
-    registry.get<Material>(room.crate).emission = glm::vec3(20.f); // a glowing crate
-    buildRayScene(registry);
-    PhotonUpdateSystem system(settingsWith(20'000));
-    firstUpdate(registry, system);
-    const auto shines = [&] {
-        const auto& lights = storeOf(registry).lights;
-        return std::any_of(lights.begin(), lights.end(), [&](const PhotonLight& l) {
-            return l.entity == room.crate && l.photonCount > 0;
-        });
-    };
-    ASSERT_TRUE(shines());
-    const PhotonStore first = storeOf(registry);
-
-    // A light going out or coming back shares the photons anew: a full shot each time, the
-    // second one the first shot again.
-    for (const bool active : {false, true}) {
-        registry.patch<MobileMesh>(room.crate).active = active;
-        registry.ctx().get<RayScene>().syncMoved(registry);
-        system.update(registry, FrameContext{active ? 2u : 1u, 0.0, 0.f, 0});
-        registry.clearChanges();
-        EXPECT_TRUE(deltaOf(registry).full);
-        EXPECT_EQ(shines(), active);
-    }
-    EXPECT_TRUE(sameStore(storeOf(registry), first));
-}
-
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
     // The crate waits out of the world 50 m away; the sun's photons still spread over the room
     // alone: the ray set is the one of the room without the crate, bit for bit.
@@ -1096,6 +1067,56 @@ TEST(PhotonUpdate, AnEmissiveSurfaceThatCannotEmitGoesDarkWithoutAFullShot) {
             EXPECT_EQ(store.paths[p].count, 0u) << "photon " << p;
         }
     }
+}
+
+TEST(PhotonUpdate, AnEmissiveMobileTakenOutOrDimmedKeepsItsPhotonsUntilItShinesAgain) {
+    // An emissive surface the photons were shot from stays a light while it is dark, taken out
+    // of the world (MobileMesh::active) or its emission set to 0: its photons are re-shot empty
+    // within the budget, not every photon shot anew, and come back when it shines again.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    registry.get<Material>(room.crate).emission = glm::vec3(20.f);
+    buildRayScene(registry);
+    PhotonSettings settings = settingsWith(10'000);
+    settings.reshootBudget = 2'000;
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore shot = storeOf(registry);
+    ASSERT_EQ(shot.lights.size(), 2u);
+    const std::uint32_t glowing = shot.lights[1].photonCount;
+    ASSERT_GT(glowing, 2'000u);
+
+    std::uint64_t frame = 0;
+    // Frames until the crate's photons are all re-shot; true when none was a full shot and
+    // they ended as `empty` says.
+    const auto sweep = [&](bool empty) {
+        for (std::uint32_t f = 0; f <= glowing / 2'000 + 1; ++f) {
+            system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+            registry.clearChanges();
+            if (deltaOf(registry).full) return false;
+        }
+        const PhotonStore& store = storeOf(registry);
+        for (std::uint32_t p = 0; p < store.pathCount(); ++p)
+            if (store.paths[p].light == 1 && (store.paths[p].count == 0) != empty) return false;
+        return true;
+    };
+
+    registry.patch<Material>(room.crate).emission = glm::vec3(0.f);
+    EXPECT_TRUE(sweep(true));
+    EXPECT_EQ(storeOf(registry).lights[1].power, glm::vec3(0.f));
+    registry.patch<Material>(room.crate).emission = glm::vec3(20.f);
+    EXPECT_TRUE(sweep(false));
+    EXPECT_TRUE(sameStore(storeOf(registry), shot));
+
+    // Out of the world: the paths it was in the way of are re-traced at once; its own photons
+    // go dark within the budget.
+    registry.patch<MobileMesh>(room.crate).active = false;
+    registry.ctx().get<RayScene>().syncMoved(registry);
+    EXPECT_TRUE(sweep(true));
+    registry.patch<MobileMesh>(room.crate).active = true;
+    registry.ctx().get<RayScene>().syncMoved(registry);
+    EXPECT_TRUE(sweep(false));
+    EXPECT_TRUE(sameStore(storeOf(registry), shot));
 }
 
 TEST(PhotonUpdate, ARedPhotonOnAGreenWallIsTracedOnWhenReTraced) {
