@@ -1038,14 +1038,20 @@ TEST(PhotonUpdate, ALightSwitchedOffAndOnIsReshotWithinTheBudget) {
     EXPECT_EQ(storeOf(registry).emittedPower, shot.emittedPower);
 }
 
+/// The room with its crate glowing (an emissive mobile), and its ray scene.
+test::Room buildGlowingCrateRoom(Registry& registry) {
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    registry.get<Material>(room.crate).emission = glm::vec3(20.f);
+    buildRayScene(registry);
+    return room;
+}
+
 TEST(PhotonUpdate, AnEmissiveSurfaceThatCannotEmitGoesDarkWithoutAFullShot) {
     // An emissive mobile whose emission turns invalid (or a surface scaled to nothing) keeps
     // its place among the lights with no power: its photons are re-shot empty, and its
     // triangles, gone, are never sampled.
     Registry registry;
-    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
-    registry.get<Material>(room.crate).emission = glm::vec3(20.f);
-    buildRayScene(registry);
+    const test::Room room = buildGlowingCrateRoom(registry);
     PhotonSettings settings = settingsWith(8'000);
     settings.reshootBudget = 100'000;
     PhotonUpdateSystem system(settings);
@@ -1074,9 +1080,7 @@ TEST(PhotonUpdate, AnEmissiveMobileTakenOutOrDimmedKeepsItsPhotonsUntilItShinesA
     // of the world (MobileMesh::active) or its emission set to 0: its photons are re-shot empty
     // within the budget, not every photon shot anew, and come back when it shines again.
     Registry registry;
-    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
-    registry.get<Material>(room.crate).emission = glm::vec3(20.f);
-    buildRayScene(registry);
+    const test::Room room = buildGlowingCrateRoom(registry);
     PhotonSettings settings = settingsWith(10'000);
     settings.reshootBudget = 2'000;
     PhotonUpdateSystem system(settings);
