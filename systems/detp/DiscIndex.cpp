@@ -29,7 +29,7 @@ constexpr std::size_t kPrefetchAhead = 8;
 /// crossing on a shared edge meets at least one of them whatever Embree's rounding.
 constexpr float kRectangleOverlap = 0.05f;
 /// The two triangles of a rectangle are this fraction larger than its halves (see
-/// splitIntoPlanes), so that they overlap across its diagonal.
+/// addRectangles), so that they overlap across its diagonal.
 constexpr float kDiagonalOverlap = 0.02f;
 /// A plane's lookup skips discs whose centre lies farther than this many radii from the
 /// crossing point in the plane: the distance the 3 x 3 cells around it guarantee, so the

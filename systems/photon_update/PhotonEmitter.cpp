@@ -219,7 +219,7 @@ PhotonHead emitPhoton(const PhotonEmitter& emitter, std::uint32_t photon, std::u
     head.photon = photon;
     // A dark light (switched off, or disabled: then its geometry may be unusable) emits a
     // photon with no power, which the tracer does not trace.
-    if (!(emitter.power.x > 0.f || emitter.power.y > 0.f || emitter.power.z > 0.f)) return head;
+    if (!carriesPower(emitter.power)) return head;
     head.power = emitter.power / float(emitter.photonCount);
     switch (emitter.kind) {
     case EmitterKind::Point:

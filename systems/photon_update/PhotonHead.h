@@ -16,4 +16,10 @@ struct PhotonHead {
     std::uint8_t bounce = 0; ///< reflections before this segment
 };
 
+/// Whether `power` (W, linear RGB) is any light at all: a light that is on, a photon worth
+/// tracing from it.
+inline bool carriesPower(const glm::vec3& power) {
+    return power.x > 0.f || power.y > 0.f || power.z > 0.f;
+}
+
 } // namespace qgi

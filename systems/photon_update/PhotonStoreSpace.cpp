@@ -21,7 +21,7 @@ constexpr std::size_t kBudgetDivisor = 32;
 
 void PhotonStoreSpace::clear() {
     mRegions.clear();
-    mOverflowStart = mOverflowLive = mLive = mReleased = 0;
+    mOverflowStart = mReleased = 0;
 }
 
 void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
@@ -35,8 +35,7 @@ void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
             live += store.paths[p].count;
         mRegions[r].cursor = live; // the region's live segments, until the spans are known
     });
-    std::size_t at = 0;
-    mLive = 0;
+    std::size_t at = 0, total = 0;
     for (Region& region : mRegions) {
         const std::size_t live = region.cursor;
         region.live = live;
@@ -45,13 +44,13 @@ void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
         region.cursor = at + live;
         region.end = at + live + region.room;
         at = region.end;
-        mLive += live;
+        total += live;
     }
     mOverflowStart = at;
-    mOverflowLive = mReleased = 0;
+    mReleased = 0;
 
     PhotonSegments packed;
-    packed.reserve(at + std::size_t(double(mLive) * (overflow + 0.125)));
+    packed.reserve(at + std::size_t(double(total) * (overflow + 0.125)));
     packed.resize(at);
     tbb::parallel_for(std::size_t(0), regions, [&](std::size_t r) {
         std::size_t to = mRegions[r].begin;
@@ -67,12 +66,10 @@ void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
 
 void PhotonStoreSpace::release(Region& region, const PhotonPath& path, std::size_t segments) {
     mReleased += segments;
-    if (path.first >= mOverflowStart) {
+    if (path.first >= mOverflowStart)
         region.overflowed -= segments;
-        mOverflowLive -= segments;
-    } else {
+    else
         region.garbage += segments;
-    }
 }
 
 std::size_t PhotonStoreSpace::place(const PhotonStore& store, std::uint32_t path, std::size_t count,
@@ -80,7 +77,6 @@ std::size_t PhotonStoreSpace::place(const PhotonStore& store, std::uint32_t path
     QGI_ASSERT(laidOut(), "PhotonStoreSpace::place before layOut");
     const PhotonPath& old = store.paths[path];
     Region& region = mRegions[regionOf(path)];
-    mLive = mLive + count - old.count;
     region.live = region.live + count - old.count;
     if (count == 0) { // an empty path (a dark light's photon) points at its region's start,
         release(region, old, old.count); // never past the store's end
@@ -99,7 +95,6 @@ std::size_t PhotonStoreSpace::place(const PhotonStore& store, std::uint32_t path
     const std::size_t at = end;
     end += count;
     region.overflowed += count;
-    mOverflowLive += count;
     return at;
 }
 
@@ -133,24 +128,32 @@ std::size_t PhotonStoreSpace::compactRegion(PhotonStore& store, std::size_t r,
         to += store.paths[p].count;
     }
     region.cursor = to;
-    region.garbage = 0;
+    region.garbage = region.overflowed = 0;
     return at;
+}
+
+std::size_t PhotonStoreSpace::liveSegments() const {
+    std::size_t live = 0;
+    for (const Region& region : mRegions)
+        live += region.live;
+    return live;
 }
 
 PhotonStoreSpace::Reclaimed PhotonStoreSpace::reclaim(PhotonStore& store, double overflow) {
     Reclaimed done;
     if (!laidOut()) return done;
+    const std::size_t live = liveSegments();
     const std::size_t overflowSize = store.segments.size() - mOverflowStart;
-    if (double(overflowSize) > overflow * double(mLive)) {
+    if (double(overflowSize) > overflow * double(live)) {
         layOut(store, overflow);
         done.laidOut = true;
-        done.copied = mLive;
+        done.copied = live;
         return done;
     }
     // Due: regions whose garbage and overflowed paths would fill half their room (compacted
     // before the room runs out, their re-traced paths stay home), and while the overflow is
     // past half its limit, every region with paths there.
-    const bool drainOverflow = double(overflowSize) > 0.5 * overflow * double(mLive);
+    const bool drainOverflow = double(overflowSize) > 0.5 * overflow * double(live);
     mOrder.clear();
     std::size_t largest = 0;
     for (std::size_t r = 0; r < mRegions.size(); ++r) {
@@ -168,7 +171,7 @@ PhotonStoreSpace::Reclaimed PhotonStoreSpace::reclaim(PhotonStore& store, double
     // half again.
     const std::size_t keepUp = std::size_t(3.0 / kRegionSlack * double(mReleased));
     mReleased = 0;
-    const std::size_t budget = std::max({mLive / kBudgetDivisor, 2 * largest, keepUp});
+    const std::size_t budget = std::max({live / kBudgetDivisor, 2 * largest, keepUp});
     std::size_t chosen = 0, planned = 0;
     while (chosen < mOrder.size() && (chosen == 0 || planned < budget)) {
         const Region& region = mRegions[mOrder[chosen++]];
@@ -176,21 +179,19 @@ PhotonStoreSpace::Reclaimed PhotonStoreSpace::reclaim(PhotonStore& store, double
     }
     mOrder.resize(chosen);
 
-    std::vector<std::size_t> overflowed(chosen);
-    std::vector<std::size_t> moved(chosen);
+    mMoved.resize(chosen);
     tbb::parallel_for(std::size_t(0), chosen, [&](std::size_t i) {
-        overflowed[i] = mRegions[mOrder[i]].overflowed;
-        moved[i] = compactRegion(store, mOrder[i], mScratch.local());
+        mMoved[i] = compactRegion(store, mOrder[i], mScratch.local());
     });
-    for (std::size_t i = 0; i < chosen; ++i) {
-        if (moved[i] == kNotPacked) continue;
-        mRegions[mOrder[i]].overflowed = 0;
-        mOverflowLive -= overflowed[i];
+    for (const std::size_t moved : mMoved) {
+        if (moved == kNotPacked) continue;
         ++done.regions;
-        done.copied += moved[i];
+        done.copied += moved;
     }
     // Once no path is left in the overflow, it is all garbage: drop it.
-    if (mOverflowLive == 0 && store.segments.size() > mOverflowStart)
+    if (store.segments.size() > mOverflowStart &&
+        std::none_of(mRegions.begin(), mRegions.end(),
+                     [](const Region& r) { return r.overflowed > 0; }))
         store.segments.resize(mOverflowStart);
     return done;
 }

@@ -57,11 +57,8 @@ public:
     /// The frame's reclaiming (see the class comment). `overflow` as for layOut.
     Reclaimed reclaim(PhotonStore& store, double overflow);
 
-    std::size_t liveSegments() const { return mLive; }
-    /// Segments of the store no path refers to (garbage, and the regions' free room).
-    std::size_t unusedSegments(const PhotonStore& store) const {
-        return store.segments.size() - mLive;
-    }
+    /// Segments the store's paths hold.
+    std::size_t liveSegments() const;
 
 private:
     struct Region {
@@ -75,18 +72,17 @@ private:
     std::size_t regionOf(std::uint32_t path) const { return path / mRegionPaths; }
     std::size_t reclaimable(const Region& r) const { return r.garbage + r.overflowed; }
     static constexpr std::size_t kNotPacked = ~std::size_t(0);
-    /// Packs region r's paths at the start of its span: the segments it moved, or kNotPacked
-    /// when they do not fit.
+    /// Packs region r's paths, overflowed ones too, at the start of its span: the segments it
+    /// moved, or kNotPacked when they do not fit.
     std::size_t compactRegion(PhotonStore& store, std::size_t r, PhotonSegments& scratch);
     void release(Region& region, const PhotonPath& path, std::size_t segments);
 
     std::size_t mRegionPaths = kMaxRegionPaths;
     std::vector<Region> mRegions;
     std::size_t mOverflowStart = 0;  ///< the overflow is [mOverflowStart, store size)
-    std::size_t mOverflowLive = 0;   ///< live segments in the overflow
-    std::size_t mLive = 0;           ///< live segments in the store
     std::size_t mReleased = 0;       ///< segments paths left since the last reclaim
     std::vector<std::size_t> mOrder; ///< per-frame: regions by what they would reclaim
+    std::vector<std::size_t> mMoved; ///< per-frame: what compactRegion returned for each
     tbb::enumerable_thread_specific<PhotonSegments> mScratch;
 };
 

@@ -68,8 +68,7 @@ void PhotonTracer::traceBlock(const RayScene& scene, const Surfaces& surfaces, s
     for (std::size_t i = 0; i < n; ++i) {
         s.state[i] = head(begin + i);
         const PhotonHead& h = s.state[i];
-        const bool dark = h.bounce == 0 && !(h.power.x > 0.f || h.power.y > 0.f || h.power.z > 0.f);
-        if (!dark) s.active[live++] = std::uint32_t(i);
+        if (h.bounce > 0 || carriesPower(h.power)) s.active[live++] = std::uint32_t(i);
     }
 
     PhotonSegments& slots = s.slots;
@@ -134,7 +133,6 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
     if (mBlocks.size() < roundBlocks) mBlocks.resize(roundBlocks);
     ends.reserve(ends.size() + count);
     const std::size_t outStart = out.size();
-    std::vector<std::size_t> blockStart(roundBlocks + 1);
     for (std::size_t round = 0; round < count; round += blockPaths * roundBlocks) {
         const std::size_t roundEnd = std::min(count, round + blockPaths * roundBlocks);
         const std::size_t blocks = (roundEnd - round + blockPaths - 1) / blockPaths;
@@ -145,25 +143,27 @@ void PhotonTracer::trace(const RayScene& scene, const Surfaces& surfaces, std::s
         });
         // Where each block's segments go (a serial sum over the blocks only), then each block's
         // path ends and copy, in parallel.
-        blockStart[0] = out.size();
-        for (std::size_t b = 0; b < blocks; ++b)
-            blockStart[b + 1] = blockStart[b] + mBlocks[b].segments.size();
+        std::size_t roundOut = out.size();
+        for (std::size_t b = 0; b < blocks; ++b) {
+            mBlocks[b].start = roundOut;
+            roundOut += mBlocks[b].segments.size();
+        }
         if (round == 0 && roundEnd < count) {
             // Grow the output once, to the first round's segments per path times the paths
             // and a sixteenth more, instead of doubling it (and copying it) along the way.
-            const double perPath = double(blockStart[blocks] - outStart) / double(roundEnd);
+            const double perPath = double(roundOut - outStart) / double(roundEnd);
             out.reserve(outStart + std::size_t(perPath * double(count) * (1.0 + 1.0 / 16.0)));
         }
         const std::size_t firstEnd = ends.size();
         ends.resize(firstEnd + (roundEnd - round));
-        out.resize(blockStart[blocks]);
+        out.resize(roundOut);
         tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
             const Block& block = mBlocks[b];
-            std::uint32_t end = std::uint32_t(blockStart[b]);
+            std::uint32_t end = std::uint32_t(block.start);
             std::uint32_t* blockEnds = ends.data() + firstEnd + b * blockPaths;
             for (std::size_t i = 0; i < block.counts.size(); ++i)
                 blockEnds[i] = end += block.counts[i];
-            out.copyFrom(blockStart[b], block.segments, 0, block.segments.size());
+            out.copyFrom(block.start, block.segments, 0, block.segments.size());
         });
     }
 }

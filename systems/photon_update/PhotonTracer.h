@@ -67,6 +67,7 @@ private:
     struct Block {
         PhotonSegments segments;
         std::vector<std::uint32_t> counts;
+        std::size_t start = 0; ///< where its segments go in the output
     };
 
     void traceBlock(const RayScene& scene, const Surfaces& surfaces, std::size_t begin,

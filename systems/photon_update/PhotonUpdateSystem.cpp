@@ -166,10 +166,6 @@ void allocatePhotons(std::vector<PhotonEmitter>& emitters, std::uint32_t photons
     }
 }
 
-bool shines(const glm::vec3& power) {
-    return power.x > 0.f || power.y > 0.f || power.z > 0.f;
-}
-
 void setBit(std::vector<std::uint64_t>& bits, std::uint32_t i, bool value) {
     const std::uint64_t mask = std::uint64_t(1) << (i & 63);
     bits[i >> 6] = value ? bits[i >> 6] | mask : bits[i >> 6] & ~mask;
@@ -315,7 +311,7 @@ bool PhotonUpdateSystem::sharesDrifted() const {
     // keep their shares of each other.
     double total = 0.0, photons = 0.0;
     for (const PhotonEmitter& e : mEmitters) {
-        if (!shines(e.power)) continue;
+        if (!carriesPower(e.power)) continue;
         total += double(e.power.x) + e.power.y + e.power.z;
         photons += e.photonCount;
     }

@@ -98,8 +98,6 @@ public:
 
     const PhotonSettings& settings() const { return mSettings; }
     const FrameStats& lastFrame() const { return mStats; }
-    /// Where the store's paths live (its regions, garbage and overflow).
-    const PhotonStoreSpace& storeSpace() const { return mSpace; }
 
 private:
     struct Mobile {
