@@ -454,6 +454,51 @@ Rings meshRings(const Registry& registry, const std::vector<Entity>& meshes) {
     return rings;
 }
 
+/// How far an incremental estimate may lie from a full one by rounding alone, W/m^2 (then one
+/// rounding to float each way, 2^-23 relative, on top). DETP: the two double sums of a vertex
+/// over pi r^2; impact count: the same per triangle, over a ring of at least the smallest
+/// triangle's area, whose float area is within 2^-16 of the one here, as in
+/// ASlidingMobileKeepsThePathsThatLandWhereTheyDid; the photon map re-estimates from scratch:
+/// exact.
+double roundingBound(const DetpSettings& settings, const SumRounding& rounding,
+                     const Rings& rings) {
+    const double r = double(settings.discRadius);
+    switch (settings.estimator) {
+    case IrradianceEstimator::Detp:
+        return rounding.sums() / (glm::pi<double>() * r * r);
+    case IrradianceEstimator::ImpactCount:
+        return rings.largest * rounding.sums() / (rings.smallestTriangle * (1.0 - 0x1p-16));
+    case IrradianceEstimator::PhotonMap:
+        return 0.0;
+    }
+    return 0.0;
+}
+
+/// The VertexIrradiance of `meshes` (an incremental system's) against a fresh system's full
+/// estimate over the current ray set, within `absolute` plus float rounding. The incremental
+/// values are put back, so that the incremental system goes on from its own.
+void expectIrradianceOfAFullEstimate(Registry& registry, const DetpSettings& settings,
+                                     const std::vector<Entity>& meshes, double absolute,
+                                     int frame) {
+    std::vector<std::vector<glm::vec3>> incremental;
+    for (const Entity e : meshes)
+        incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
+    DetpIrradianceSystem reference(settings);
+    reference.build(registry);
+    reference.update(registry, FrameContext{});
+    for (std::size_t m = 0; m < meshes.size(); ++m) {
+        auto& full = registry.get<VertexIrradiance>(meshes[m]).irradiance;
+        for (std::size_t v = 0; v < full.size(); ++v)
+            for (int c = 0; c < 3; ++c)
+                ASSERT_NEAR(incremental[m][v][c], full[v][c],
+                            std::ldexp(double(full[v][c]), -23) + absolute)
+                    << registry.get<Name>(meshes[m]).value << " vertex " << v << ", frame "
+                    << frame;
+        full = incremental[m];
+    }
+    registry.clearChanges();
+}
+
 /// Irradiance estimators following mobiles taken out and put back, frame by frame.
 class MobilesTakenOut : public ::testing::TestWithParam<IrradianceEstimator> {};
 
@@ -477,38 +522,12 @@ TEST_P(MobilesTakenOut, IrradianceEqualsAFullEstimateEveryFrameAndAnInactiveMobi
     registry.clearChanges();
     const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
 
-    // Rounding bounds (DETP: the two double sums of a vertex over pi r^2; impact count: the same
-    // per triangle, over a ring of at least the smallest triangle's area, whose float area is
-    // within 2^-16 of the one here, as in ASlidingMobileKeepsThePathsThatLandWhereTheyDid; the
-    // photon map re-estimates from scratch: exact), then one rounding to float each way
-    // (2^-23 relative).
     SumRounding rounding;
     rounding.add(storeOf(registry).segments);
     const Rings rings = meshRings(registry, meshes);
     const auto expectFullEstimate = [&](int frame) {
-        const double absolute =
-            GetParam() == IrradianceEstimator::Detp
-                ? rounding.sums() / (glm::pi<double>() * 0.05 * 0.05)
-            : GetParam() == IrradianceEstimator::ImpactCount
-                ? rings.largest * rounding.sums() / (rings.smallestTriangle * (1.0 - 0x1p-16))
-                : 0.0;
-        std::vector<std::vector<glm::vec3>> incremental;
-        for (const Entity e : meshes)
-            incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
-        DetpIrradianceSystem reference(settings);
-        reference.build(registry);
-        reference.update(registry, FrameContext{});
-        for (std::size_t m = 0; m < meshes.size(); ++m) {
-            auto& full = registry.get<VertexIrradiance>(meshes[m]).irradiance;
-            for (std::size_t v = 0; v < full.size(); ++v)
-                for (int c = 0; c < 3; ++c)
-                    ASSERT_NEAR(incremental[m][v][c], full[v][c],
-                                std::ldexp(double(full[v][c]), -23) + absolute)
-                        << registry.get<Name>(meshes[m]).value << " vertex " << v << ", frame "
-                        << frame;
-            full = incremental[m]; // the incremental system goes on from its own values
-        }
-        registry.clearChanges();
+        expectIrradianceOfAFullEstimate(registry, settings, meshes,
+                                        roundingBound(settings, rounding, rings), frame);
     };
 
     // Every case: out where it stands, moved while another is out, back elsewhere, moved
@@ -605,6 +624,117 @@ INSTANTIATE_TEST_SUITE_P(Estimators, MobilesTakenOut,
                          [](const auto& test) {
                              return std::string(irradianceEstimatorName(test.param));
                          });
+
+/// W of the stored segments that end on a surface (impacts), per channel, over live paths.
+glm::dvec3 impactPower(const PhotonSegments& segments, std::size_t first, std::size_t count) {
+    glm::dvec3 sum(0.0);
+    for (std::size_t s = first; s < first + count; ++s)
+        if (segments.hitEntity[s]) sum += glm::dvec3(segments.power[s]);
+    return sum;
+}
+glm::dvec3 impactPower(const PhotonStore& store) {
+    glm::dvec3 sum(0.0);
+    for (const PhotonPath& path : store.paths)
+        sum += impactPower(store.segments, path.first, path.count);
+    return sum;
+}
+
+// A hundred frames of play through the real systems with their defaults (landed paths kept):
+// the cube slides a centimetre at a time, the crate jumps and turns, both in some frames, and
+// every 25 frames the light moves and is re-shot a quarter of its photons a frame, over the
+// mobiles' moves. Every frame the delta accounts for every watt the store gained or lost, and
+// every 10 frames DETP's incremental irradiance equals a fresh full estimate over the current
+// ray set, within the rounding of its sums.
+TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    // Vertices all over, 10 cm apart on the mobiles and 25 cm on the room: discs to cross.
+    MeshProcessingOptions refine;
+    refine.maxEdgeLength = 0.1f;
+    for (const Entity mobile : {room.cube, room.crate})
+        registry.get<Mesh>(mobile) = processMesh(registry.get<Mesh>(mobile), refine);
+    refine.maxEdgeLength = 0.25f;
+    for (const Entity still : {room.walls, room.pillar})
+        registry.get<Mesh>(still) = processMesh(registry.get<Mesh>(still), refine);
+    buildRayScene(registry);
+    PhotonSettings photonSettings = settingsWith(20'000);
+    photonSettings.reshootBudget = 5'000;
+    ASSERT_TRUE(photonSettings.reuseLandedPaths);
+    PhotonUpdateSystem photons(photonSettings);
+    photons.update(registry, FrameContext{});
+    DetpSettings settings;
+    settings.discRadius = 0.05f;
+    DetpIrradianceSystem detp(settings);
+    detp.build(registry);
+    detp.update(registry, FrameContext{});
+    registry.clearChanges();
+    const std::vector<Entity> meshes = registry.view<const Mesh>().entities();
+    SumRounding rounding;
+    rounding.add(storeOf(registry).segments);
+    const Rings rings = meshRings(registry, meshes);
+
+    std::mt19937 rng(2024);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    glm::vec3 cube = kCubeRest;
+    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0;
+    for (int frame = 1; frame <= 100; ++frame) {
+        const float pick = unit(rng);
+        if (pick < 0.7f) { // a 1 cm slide along x or z, turning back at the room's sides
+            glm::vec3 step(0.f);
+            step[unit(rng) < 0.5f ? 0 : 2] = unit(rng) < 0.5f ? -0.01f : 0.01f;
+            if (glm::abs(cube + step).x > 1.5f || (cube + step).z < -1.5f || (cube + step).z > 0.4f)
+                step = -step;
+            cube += step;
+            registry.patch<WorldTransform>(room.cube).matrix = translation(cube);
+        }
+        if (pick > 0.5f) { // the crate anywhere on the floor in front of the pillar, turned
+            const glm::vec3 at(-1.5f + 3.f * unit(rng), kCrateRest.y, -1.5f + 1.9f * unit(rng));
+            registry.patch<WorldTransform>(room.crate).matrix = glm::rotate(
+                translation(at), glm::two_pi<float>() * unit(rng), glm::vec3(0.f, 1.f, 0.f));
+        }
+        if (frame % 25 == 0)
+            registry.patch<WorldTransform>(room.light).matrix =
+                translation({-1.f + 2.f * unit(rng), 0.5f + 0.7f * unit(rng), -1.f + unit(rng)});
+        registry.ctx().get<RayScene>().syncMoved(registry);
+
+        const glm::dvec3 before = impactPower(storeOf(registry));
+        photons.update(registry, FrameContext{std::uint64_t(frame), 0.0, 0.f, 0});
+        const PhotonDelta& delta = deltaOf(registry);
+        ASSERT_FALSE(delta.full) << "frame " << frame;
+        const PhotonUpdateSystem::FrameStats& stats = photons.lastFrame();
+        retraced += stats.retracedPaths;
+        landed += stats.landedPaths;
+        if (stats.reshotPaths > 0 && stats.retracedPaths > 0) ++reshotWithMoves;
+        const glm::dvec3 after = impactPower(storeOf(registry));
+        const glm::dvec3 expected = before -
+                                    impactPower(delta.oldSegments, 0, delta.oldSegments.size()) +
+                                    impactPower(delta.newSegments, 0, delta.newSegments.size());
+        // Four double sums of at most n terms of at most p W each: within 4 n^2 p 2^-53.
+        SumRounding bookkeeping;
+        bookkeeping.add(storeOf(registry).segments);
+        bookkeeping.add(delta.oldSegments);
+        bookkeeping.add(delta.newSegments);
+        for (int c = 0; c < 3; ++c)
+            ASSERT_NEAR(after[c], expected[c], 2.0 * bookkeeping.sums())
+                << "frame " << frame << ", channel " << c;
+
+        rounding.add(delta.oldSegments);
+        rounding.add(delta.newSegments, 2.0 * double(delta.relabels.size()));
+        detp.update(registry, FrameContext{std::uint64_t(frame), 0.0, 0.f, 0});
+        ASSERT_FALSE(detp.lastFrame().full) << "frame " << frame;
+        registry.clearChanges();
+        if (frame % 10 == 0) {
+            expectIrradianceOfAFullEstimate(registry, settings, meshes,
+                                            roundingBound(settings, rounding, rings), frame);
+            if (HasFatalFailure()) return;
+        }
+    }
+    // Every kind of change happened: paths re-traced, landings kept, and the light's re-shoots
+    // in frames where mobiles moved too.
+    EXPECT_GT(retraced, 10'000u);
+    EXPECT_GT(landed, 1'000u);
+    EXPECT_GE(reshotWithMoves, 6u);
+}
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
     // The crate waits out of the world 50 m away; the sun's photons still spread over the room
