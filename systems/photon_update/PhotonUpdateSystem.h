@@ -36,13 +36,20 @@ class PhotonPathGrid;
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built; PhotonDelta::full.
  *
- *  Otherwise incremental, and the delta lists exactly what changed:
+ *  Otherwise incremental, and the delta lists what changed:
  *   - Mobiles whose pose changed (the ray scene already holds the new pose): the paths with a
  *     segment that hit a moved mobile at its old pose (its recorded hit), or that crosses it
  *     at its new pose, are re-traced from their first such segment; the prefix is untouched.
  *     A mobile taken out (MobileMesh::active) has no new pose, one put back no old one.
  *     Candidates come from the PhotonPathGrid (old and new boxes of every moved mobile), then
  *     an exact test per segment: cost grows with the paths near the mobiles.
+ *     With PhotonSettings::reuseLandedPaths (the default), a segment that hit a mobile which
+ *     only translated, and still lands on it at the same point of the same plane (within a
+ *     millionth of the scene's diagonal), is not an affected segment: the photon reflects as
+ *     it did, so its path is kept up to its next affected segment. Such a kept landing is in
+ *     the delta as a PhotonRelabel when it lands on another triangle of the plane; the kept
+ *     paths then equal a fresh shot's up to that tolerance, not bit for bit. Off: the seed's
+ *     rule, and the store stays bit-identical to a fresh shot.
  *   - Lights that moved or changed: their own photons are re-shot with the same indices,
  *     reshootBudget photons per frame in all (shared evenly among such lights), oldest first,
  *     until each has been re-shot once since its last change; the delta reports each one with
