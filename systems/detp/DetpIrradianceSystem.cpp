@@ -87,7 +87,7 @@ void DetpIrradianceSystem::build(Registry& registry) {
     mStaticDiscs = std::move(staticDiscs);
     mMobileDiscs = std::move(mobileDiscs);
     const std::size_t vertices = mReceivers.vertexCount();
-    mPowerSum.assign(vertices, glm::dvec3(0.0));
+    mPowerSum.assign(vertices, CompensatedSum{});
     mUpdateCount.assign(vertices, 0);
     mIrradiance.assign(vertices, glm::vec3(0.f));
     mIsTouched.assign(vertices, 0);
@@ -226,7 +226,7 @@ void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t first
         mStats.crossings += mCrossings.size();
         for (const DiscCrossing& c : mCrossings) {
             const std::uint32_t v = firstVertex + c.disc;
-            mPowerSum[v] += sign * glm::dvec3(segments.power[c.segment]);
+            mPowerSum[v].add(sign * glm::dvec3(segments.power[c.segment]));
             if (!incremental) continue;
             if (++mUpdateCount[v] >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
             if (!mIsTouched[v]) {
@@ -254,7 +254,7 @@ float DetpIrradianceSystem::crossingTail() const {
 void DetpIrradianceSystem::clearReceiver(std::uint32_t receiver) {
     const auto& r = mReceivers.receivers()[receiver];
     const std::uint32_t first = r.firstVertex, end = first + r.vertexCount;
-    std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, glm::dvec3(0.0));
+    std::fill(mPowerSum.begin() + first, mPowerSum.begin() + end, CompensatedSum{});
     std::fill(mUpdateCount.begin() + first, mUpdateCount.begin() + end, 0u);
     std::fill(mIrradiance.begin() + first, mIrradiance.begin() + end, glm::vec3(0.f));
 }
@@ -327,7 +327,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
                         mSegmentList, {}, 1.0, false);
         const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
         for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
-            mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
+            mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
     }
 }
 
@@ -408,12 +408,12 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
     const auto receivers = mReceivers.receivers();
     if (full) {
-        std::fill(mPowerSum.begin(), mPowerSum.end(), glm::dvec3(0.0));
+        std::fill(mPowerSum.begin(), mPowerSum.end(), CompensatedSum{});
         std::fill(mUpdateCount.begin(), mUpdateCount.end(), 0u);
         listCountedSegments(store, mSegmentList);
         accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
         for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
-            mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
+            mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
         mAllMobiles.clear();
         for (std::uint32_t r = 0; r < receivers.size(); ++r)
             if (receivers[r].mobile) mAllMobiles.push_back(r);
@@ -456,7 +456,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     }
     for (const std::uint32_t v : mTouched) {
         mIsTouched[v] = 0;
-        mIrradiance[v] = published(mPowerSum[v] * toIrradiance);
+        mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
     }
     std::sort(mTouched.begin(), mTouched.end());
     mReceivers.publish(registry, mIrradiance, mTouched);

@@ -41,7 +41,7 @@ struct DetpSettings {
     /// Drift bound of the incremental updates (see DetpIrradianceSystem): a vertex (triangle,
     /// for impact count) whose double-precision sum has taken this many additions since its
     /// last full estimate schedules a full re-estimate for the next frame.
-    std::uint32_t maxIncrementalUpdates = 1u << 24;
+    std::uint32_t maxIncrementalUpdates = 1u << 30;
 };
 
 /// Default search cap of the photon map, in disc radii: wide enough that k = 50 hit points are

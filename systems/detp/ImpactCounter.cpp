@@ -12,7 +12,7 @@ void ImpactCounter::reset(const ReceiverSet& receivers) {
     const std::span<const glm::uvec3> triangles = receivers.triangles();
     const std::size_t vertexCount = receivers.vertexCount();
     mTriangles.assign(triangles.begin(), triangles.end());
-    mTrianglePower.assign(triangles.size(), glm::dvec3(0.0));
+    mTrianglePower.assign(triangles.size(), CompensatedSum{});
     mUpdateCount.assign(triangles.size(), 0);
     mMaxUpdates = 0;
     mTriangleArea.assign(receivers.triangleAreas().begin(), receivers.triangleAreas().end());
@@ -62,7 +62,7 @@ void ImpactCounter::accumulate(const ReceiverSet& receivers, const PhotonSegment
 }
 
 void ImpactCounter::add(std::uint32_t t, const glm::vec3& power, double sign) {
-    mTrianglePower[t] += sign * glm::dvec3(power);
+    mTrianglePower[t].add(sign * glm::dvec3(power));
     mMaxUpdates = std::max(mMaxUpdates, ++mUpdateCount[t]);
     if (!mTriangleTouched[t]) {
         mTriangleTouched[t] = 1;
@@ -85,7 +85,7 @@ void ImpactCounter::moveImpact(const ReceiverSet& receivers, Entity hit, std::ui
 void ImpactCounter::clearTriangles(const ReceiverSet::Receiver& receiver) {
     for (std::uint32_t t = receiver.firstTriangle;
          t < receiver.firstTriangle + receiver.triangleCount; ++t) {
-        mTrianglePower[t] = glm::dvec3(0.0);
+        mTrianglePower[t] = CompensatedSum{};
         mUpdateCount[t] = 0;
         if (!mTriangleTouched[t]) {
             mTriangleTouched[t] = 1;
@@ -115,7 +115,7 @@ glm::vec3 ImpactCounter::irradiance(std::uint32_t vertex) const {
     if (mRingArea[vertex] <= 0.0) return glm::vec3(0.f);
     glm::dvec3 power(0.0);
     for (std::uint32_t i = mRingStart[vertex]; i < mRingStart[vertex + 1]; ++i)
-        power += mTrianglePower[mRingTriangles[i]];
+        power += mTrianglePower[mRingTriangles[i]].value();
     // Additions and subtractions that cancel can leave a rounding error below zero.
     return glm::vec3(glm::max(power / mRingArea[vertex], glm::dvec3(0.0)));
 }

@@ -1,6 +1,7 @@
 #pragma once
 
 #include "runtime/ecs/Entity.h"
+#include "systems/detp/CompensatedSum.h"
 #include "systems/detp/ReceiverSet.h"
 
 #include <glm/vec3.hpp>
@@ -15,8 +16,9 @@ struct PhotonSegments;
 
 /** Impact count (seed 000 sections 3.5 and 3.6.1), kept for comparison with DETP.
  *  Each receiver triangle accumulates the power of the segments that end on it (from either
- *  side: a stored hit is an impact), in double precision, so the paper's Add/Subtract update
- *  is exact up to rounding for static and mobile triangles alike. A vertex's irradiance is
+ *  side: a stored hit is an impact) in double precision, carrying its rounding error
+ *  (CompensatedSum), so the paper's Add/Subtract update is exact up to rounding for static and
+ *  mobile triangles alike. A vertex's irradiance is
  *  the area-weighted mean of its incident triangles' power / area,
  *      E(v) = sum_t P_t / sum_t A_t   over the triangles t around v,
  *  which is the flux through the vertex's one-ring over the ring's area: unbiased under
@@ -47,10 +49,11 @@ public:
 
     /// W/m^2 at a vertex (global index of the ReceiverSet).
     glm::vec3 irradiance(std::uint32_t vertex) const;
-    /// W of impacts per triangle (global index of the ReceiverSet).
-    std::span<const glm::dvec3> trianglePower() const { return mTrianglePower; }
-    /// The most additions any triangle's sum has taken since reset(): its rounding error is
-    /// at most that many times 2^-53 of its largest partial sum.
+    /// W of impacts on triangle t (global index of the ReceiverSet).
+    glm::dvec3 trianglePower(std::uint32_t t) const { return mTrianglePower[t].value(); }
+    std::size_t triangleCount() const { return mTrianglePower.size(); }
+    /// The most additions any triangle's sum has taken since reset() (CompensatedSum gives the
+    /// bound on its rounding error).
     std::uint32_t maxUpdates() const { return mMaxUpdates; }
 
 private:
@@ -58,7 +61,7 @@ private:
     void add(std::uint32_t triangle, const glm::vec3& power, double sign);
 
     std::vector<glm::uvec3> mTriangles; ///< global vertex ids
-    std::vector<glm::dvec3> mTrianglePower;
+    std::vector<CompensatedSum> mTrianglePower;
     std::vector<std::uint32_t> mUpdateCount; ///< per triangle, additions since reset()
     std::uint32_t mMaxUpdates = 0;
     std::vector<float> mTriangleArea;      ///< m^2

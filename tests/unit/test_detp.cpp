@@ -705,8 +705,9 @@ TEST(Detp, DriftPolicySchedulesAFullReestimate) {
 
 TEST(Detp, IncrementalSumsThatCancelNeverPublishNegativeIrradiance) {
     // A bright and a faint photon land on the floor's centre vertex: in double, 1e8 + 1e-9 is
-    // 1e8. Taking the bright one away, then the faint one, leaves -1e-9 where the exact sum is
-    // 0. Irradiance is never negative: the vertex publishes 0.
+    // 1e8. With plain double sums, taking the bright one away, then the faint one, left -1e-9
+    // where the exact sum is 0; the sums now carry their rounding error and reach 0 exactly.
+    // Either way irradiance is never negative: the vertex publishes 0.
     Registry registry;
     addDetpResources(registry);
     const Entity floor = addUnitFloor(registry, 20);
@@ -750,6 +751,66 @@ TEST(Detp, IncrementalSumsThatCancelNeverPublishNegativeIrradiance) {
         ASSERT_FALSE(system.lastFrame().full);
     }
     EXPECT_EQ(irradiance(registry, floor).irradiance[v], glm::vec3(0.f));
+}
+
+TEST(Detp, ABrightPhotonThatComesAndGoesLeavesTheFaintOnesIntact) {
+    // A 1e8 W photon and a thousand of 1e-9 W land on the floor's centre vertex; then the
+    // bright one leaves. Plain double sums lose every faint photon under the bright one (each
+    // addition rounds back to 1e8) and end at 0, checked below; the vertex's sum carries its
+    // rounding error (CompensatedSum), so it ends where a fresh estimate of the faint photons
+    // does, to the float it is published in.
+    constexpr std::uint32_t kFaint = 1000;
+    Registry registry;
+    addDetpResources(registry);
+    const Entity floor = addUnitFloor(registry, 20);
+    const glm::vec3 centre(0.5f, 0.f, 0.5f);
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    const Segment bright{
+        centre + glm::vec3(0.f, 1.f, 0.f), {0.f, -1.f, 0.f}, 1.f, glm::vec3(1e8f), floor, 0, 0};
+    Segment faint = bright;
+    faint.power = glm::vec3(1e-9f);
+    appendPath(store, std::span(&bright, 1));
+    for (std::uint32_t i = 0; i < kFaint; ++i)
+        appendPath(store, std::span(&faint, 1));
+    double plain = double(bright.power.x);
+    for (std::uint32_t i = 0; i < kFaint; ++i)
+        plain += double(faint.power.x);
+    plain -= double(bright.power.x);
+    EXPECT_EQ(plain, 0.0) << "the case does not need compensation";
+
+    DetpSettings settings;
+    settings.discRadius = 0.03f;
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    // The bright photon now leaves straight up.
+    PhotonDelta& delta = registry.ctx().get<PhotonDelta>();
+    delta = PhotonDelta{};
+    delta.sequence = 1;
+    delta.paths = {0};
+    push(delta.oldSegments, bright);
+    const Segment away{
+        centre + glm::vec3(0.f, 1.f, 0.f), {0.f, 1.f, 0.f}, kInf, glm::vec3(1e8f), {}, 0, 0};
+    push(delta.newSegments, away);
+    delta.oldFirst = {0, 1};
+    delta.newFirst = {0, 1};
+    store.segments.direction[0] = away.direction;
+    store.segments.length[0] = kInf;
+    store.segments.hitEntity[0] = Entity{};
+    system.update(registry, {});
+    ASSERT_FALSE(system.lastFrame().full);
+    const std::uint32_t v = 10 * 21 + 10; // the centre vertex
+    const float incremental = irradiance(registry, floor).irradiance[v].x;
+
+    DetpIrradianceSystem fresh(settings);
+    fresh.build(registry);
+    registry.ctx().get<PhotonDelta>().full = true;
+    fresh.update(registry, {});
+    const float full = irradiance(registry, floor).irradiance[v].x;
+    const double exact = double(kFaint) * double(faint.power.x) /
+                         (kPi * double(settings.discRadius) * double(settings.discRadius));
+    EXPECT_NEAR(full, exact, exact * 0x1p-20);
+    EXPECT_NEAR(incremental, full, std::ldexp(double(full), -22));
 }
 
 TEST(Detp, EachDeltaIsAppliedOnceAndAMissedOneForcesAFullEstimate) {
