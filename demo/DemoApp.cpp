@@ -33,11 +33,13 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -110,12 +112,70 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
 
 /// Makes sure an output's folder exists and can be written, before a long run rather than
 /// after it. Throws qgi::Error naming the option.
+/// What --export-irradiance holds, in each mode (a comment in the PLY header).
+constexpr const char* kPhotonExportNote = "photon mode: all light, from photons";
+constexpr const char* kHybridExportNote =
+    "hybrid mode: the direct light of the lights the renderer draws (point, spot and "
+    "directional lights, emissive surfaces with a light stand-in) is left out; the rest, light "
+    "that reflected at least once, is in";
+
+/// The signal that asked the frame loop to stop (SIGINT or SIGTERM), or 0.
+volatile std::sig_atomic_t gInterrupt = 0;
+
+extern "C" void onInterrupt(int signal) {
+    gInterrupt = signal;
+    constexpr char kMessage[] =
+        "\nqgi-demo: interrupted: stopping after this frame and writing the outputs (again to "
+        "quit at once)\n";
+    [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
+}
+
+/// While alive, Ctrl-C (SIGINT) and SIGTERM end the frame loop after the frame in progress, so
+/// that the outputs of the frames run are written; a second one ends the process at once (the
+/// handlers are one-shot). Before the loop (a long bake) the defaults stand.
+class InterruptGuard {
+public:
+    InterruptGuard() {
+        gInterrupt = 0;
+        struct sigaction action {};
+        action.sa_handler = onInterrupt;
+        sigemptyset(&action.sa_mask);
+        action.sa_flags = SA_RESETHAND;
+        sigaction(SIGINT, &action, &mPreviousInt);
+        sigaction(SIGTERM, &action, &mPreviousTerm);
+    }
+    ~InterruptGuard() {
+        sigaction(SIGINT, &mPreviousInt, nullptr);
+        sigaction(SIGTERM, &mPreviousTerm, nullptr);
+    }
+    InterruptGuard(const InterruptGuard&) = delete;
+    InterruptGuard& operator=(const InterruptGuard&) = delete;
+
+private:
+    struct sigaction mPreviousInt {};
+    struct sigaction mPreviousTerm {};
+};
+
+/// Checks an output option before the run: a file path (or, `extended`, a base path that
+/// names the files BASE + each of `extensions`) that can be written, and that is not the scene
+/// being loaded.
 void prepareOutput(const std::optional<std::string>& base, const char* option,
-                   bool extended = false) {
+                   const std::string& scene, bool extended = false,
+                   std::initializer_list<const char*> extensions = {}) {
     if (!base) return;
     namespace fs = std::filesystem;
     if (base->empty()) fail(option, ": the path is empty");
     std::error_code error;
+    std::vector<fs::path> files;
+    if (!extended) files.emplace_back(*base);
+    for (const char* extension : extensions)
+        files.emplace_back(*base + extension);
+    for (const fs::path& file : files) {
+        if (fs::exists(file, error) && fs::equivalent(file, scene, error))
+            fail(option, ": '", file.string(),
+                 "' is the scene being loaded (--scene); not "
+                 "overwritten");
+    }
     // A base path (`extended`) names files BASE.ext: a folder of that name is no obstacle.
     if (base->back() == '/' || (!extended && fs::is_directory(*base, error)))
         fail(option, ": '", *base, "' is a folder; give a file path");
@@ -158,11 +218,16 @@ bool wantVlf(const Registry& registry) {
 
 int runDemo(const DemoOptions& options) {
     if (options.quiet) setLogLevel(LogLevel::Warning);
-    prepareOutput(options.screenshot, "--screenshot", true);
-    prepareOutput(options.profile, "--profile", true);
-    prepareOutput(options.exportScene, "--export-scene");
-    prepareOutput(options.exportIrradiance, "--export-irradiance");
-    prepareOutput(options.exportAvatars, "--export-avatars");
+    prepareOutput(options.screenshot, "--screenshot", options.scene, true, {".png", ".exr"});
+    prepareOutput(options.profile, "--profile", options.scene, true, {".json", ".csv"});
+    prepareOutput(options.exportScene, "--export-scene", options.scene);
+    prepareOutput(options.exportIrradiance, "--export-irradiance", options.scene);
+    prepareOutput(options.exportAvatars, "--export-avatars", options.scene);
+    // An earlier export is rewritten; any other file is somebody's.
+    if (options.exportIrradiance && std::filesystem::exists(*options.exportIrradiance) &&
+        !looksLikePly(*options.exportIrradiance))
+        fail("--export-irradiance: '", *options.exportIrradiance,
+             "' exists and is not a PLY file; not overwritten");
     // Cache files are rewritten when stale: never over somebody's file.
     if (!options.pointCacheFile.empty())
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
@@ -207,7 +272,6 @@ int runDemo(const DemoOptions& options) {
         frameSettings.photons->fullRecompute = options.fullRecompute;
         frameSettings.irradiance.estimator = parseIrradianceEstimator(options.estimator);
         frameSettings.irradiance.discRadius = options.discRadius;
-        frameSettings.irradiance.hybrid = options.mode == "hybrid";
     } else {
         frameSettings.photons.reset();
         if (options.mode == "photon")
@@ -233,6 +297,7 @@ int runDemo(const DemoOptions& options) {
         }
         frameSettings.vlf = vlf;
     }
+    frameSettings.irradiance.hybrid = options.mode == "hybrid";
     frameSettings.probes->hybrid = options.mode == "hybrid";
     frameSettings.probes->seed = options.seed;
     const bool pointCache =
@@ -273,7 +338,15 @@ int runDemo(const DemoOptions& options) {
     FrameContext context;
     context.seed = options.seed;
     auto last = std::chrono::steady_clock::now();
+    const InterruptGuard interruptGuard;
     for (std::uint64_t f = 0; options.frames == 0 || f < std::uint64_t(options.frames); ++f) {
+        if (gInterrupt) {
+            logWarning("stopped after ", f, " of ", options.frames, " frames",
+                       options.screenshot && options.headless
+                           ? ": no screenshot (it is taken after the last frame)"
+                           : "");
+            break;
+        }
         window.pollEvents();
         if (window.shouldClose()) break;
         if (!options.headless && glfwGetKey(window.handle(), GLFW_KEY_ESCAPE) == GLFW_PRESS) break;
@@ -320,8 +393,11 @@ int runDemo(const DemoOptions& options) {
     };
     if (options.exportIrradiance)
         write("--export-irradiance", [&] {
-            exportVertexIrradiance(world, *options.exportIrradiance);
-            logInfo("wrote ", *options.exportIrradiance);
+            const bool hybrid = options.mode == "hybrid";
+            exportVertexIrradiance(world, *options.exportIrradiance, PlyFormat::BinaryLittleEndian,
+                                   hybrid ? kHybridExportNote : kPhotonExportNote);
+            logInfo("wrote ", *options.exportIrradiance,
+                    hybrid ? " (hybrid mode: without the direct light the renderer draws)" : "");
         });
     if (options.exportAvatars)
         write("--export-avatars", [&] {
@@ -336,7 +412,7 @@ int runDemo(const DemoOptions& options) {
         });
     if (!failures.empty()) fail(failures);
     if (!options.quiet) std::printf("\n%s", profiler.summaryTable().c_str());
-    return 0;
+    return gInterrupt ? 128 + int(gInterrupt) : 0; // the shell's code for a signal
 }
 
 } // namespace qgi::demo

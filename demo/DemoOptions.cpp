@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <string>
+#include <vector>
 
 namespace qgi::demo {
 
@@ -138,16 +139,33 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         ->check([](const std::string& value) {
             return value.starts_with('-') ? "a seed cannot be negative" : std::string{};
         });
+    // A base path given with one of its files' extensions means the base: shot.png is shot.
+    const auto baseOf = [](std::vector<std::string> extensions) {
+        return CLI::Validator(
+            [extensions = std::move(extensions)](std::string& value) {
+                for (const std::string& extension : extensions)
+                    if (value.size() > extension.size() && value.ends_with(extension))
+                        value.resize(value.size() - extension.size());
+                return std::string{};
+            },
+            "", "base path");
+    };
     app.add_option("--screenshot", o.screenshot,
-                   "Base path: writes BASE.exr (linear HDR) and BASE.png (tonemapped) after the last frame");
+                   "Base path: writes BASE.exr (linear HDR) and BASE.png (tonemapped) after the "
+                   "last frame (shot.png or shot.exr also name the base shot)")
+        ->transform(baseOf({".png", ".exr"}));
     app.add_option("--profile", o.profile,
                    "Base path: writes BASE.json (Chrome trace, opens in Perfetto) and BASE.csv "
-                   "(per-frame, per-entry times)");
+                   "(per-frame, per-entry times)")
+        ->transform(baseOf({".json", ".csv"}));
     app.add_option("--export-scene", o.exportScene,
                    "Writes the loaded scene as glTF (.gltf or .glb) with qgi's conventions");
     app.add_option("--export-irradiance", o.exportIrradiance,
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
-                   "er eg eb (W/m^2) and a mobile flag per vertex");
+                   "er eg eb (W/m^2) and a mobile flag per vertex. In hybrid mode it leaves out "
+                   "the direct light the renderer draws (of point, spot and directional lights); "
+                   "--mode photon exports all light. An existing file that is not a PLY is not "
+                   "overwritten");
     app.add_option("--vlf", o.vlf,
                    "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
                    "the static scene has 1 to 256 glossy or mirror faces)")

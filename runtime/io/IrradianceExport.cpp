@@ -36,8 +36,8 @@ PlyMesh gatherVertexIrradiance(const Registry& registry) {
 }
 
 void exportVertexIrradiance(const Registry& registry, const std::filesystem::path& path,
-                            PlyFormat format) {
-    writePly(path, gatherVertexIrradiance(registry), format);
+                            PlyFormat format, std::string_view note) {
+    writePly(path, gatherVertexIrradiance(registry), format, note);
 }
 
 } // namespace qgi

@@ -13,8 +13,10 @@ namespace qgi {
 /// are mobiles out of the world (MobileMesh::active false).
 PlyMesh gatherVertexIrradiance(const Registry& registry);
 
-/// Writes gatherVertexIrradiance as PLY (header documented in Ply.h). Throws qgi::Error.
+/// Writes gatherVertexIrradiance as PLY (header documented in Ply.h), with `note` as a header
+/// comment when not empty. Throws qgi::Error.
 void exportVertexIrradiance(const Registry& registry, const std::filesystem::path& path,
-                            PlyFormat format = PlyFormat::BinaryLittleEndian);
+                            PlyFormat format = PlyFormat::BinaryLittleEndian,
+                            std::string_view note = {});
 
 } // namespace qgi

@@ -109,8 +109,10 @@ private:
 void writePly(const std::filesystem::path& path, std::span<const glm::vec3> positions,
               std::span<const glm::vec3> normals, std::span<const glm::vec3> irradiance,
               std::span<const std::uint8_t> mobile, std::span<const std::uint32_t> triangles,
-              PlyFormat format) {
+              PlyFormat format, std::string_view note) {
     const std::size_t n = positions.size();
+    if (note.find_first_of("\r\n") != std::string_view::npos)
+        fail("cannot write PLY '", path.string(), "': the note spans more than one line");
     if (normals.size() != n || irradiance.size() != n || mobile.size() != n)
         fail("cannot write PLY '", path.string(), "': ", n, " positions but ", normals.size(),
              " normals, ", irradiance.size(), " irradiance values, ", mobile.size(),
@@ -123,10 +125,11 @@ void writePly(const std::filesystem::path& path, std::span<const glm::vec3> posi
             fail("cannot write PLY '", path.string(), "': vertex index ", index, " >= ", n);
 
     const bool binary = format == PlyFormat::BinaryLittleEndian;
-    std::string out = str("ply\nformat ", binary ? "binary_little_endian" : "ascii",
-                          " 1.0\ncomment qgi vertex irradiance: x y z metres, nx ny nz unit "
-                          "normal, er eg eb W/m^2\nelement vertex ",
-                          n, "\n");
+    std::string out =
+        str("ply\nformat ", binary ? "binary_little_endian" : "ascii",
+            " 1.0\ncomment qgi vertex irradiance: x y z metres, nx ny nz unit "
+            "normal, er eg eb W/m^2\n",
+            note.empty() ? std::string() : str("comment ", note, "\n"), "element vertex ", n, "\n");
     for (const std::string_view property : kVertexProperties)
         out.append(property).append("\n");
     if (!triangles.empty())
@@ -163,6 +166,13 @@ void writePly(const std::filesystem::path& path, std::span<const glm::vec3> posi
     std::ofstream file(path, std::ios::binary | std::ios::trunc);
     file.write(out.data(), std::streamsize(out.size()));
     if (!file) fail("cannot write PLY '", path.string(), "'");
+}
+
+bool looksLikePly(const std::filesystem::path& path) {
+    std::ifstream file(path, std::ios::binary);
+    char magic[4] = {};
+    return file.read(magic, 4) && magic[0] == 'p' && magic[1] == 'l' && magic[2] == 'y' &&
+           (magic[3] == '\n' || magic[3] == '\r');
 }
 
 PlyMesh readPly(const std::filesystem::path& path) {

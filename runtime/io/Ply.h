@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <span>
+#include <string_view>
 #include <vector>
 
 namespace qgi {
@@ -25,6 +26,7 @@ struct PlyMesh {
  *      ply
  *      format binary_little_endian 1.0          (or: format ascii 1.0)
  *      comment qgi vertex irradiance: x y z metres, nx ny nz unit normal, er eg eb W/m^2
+ *      comment <note>                            (only when `note` is not empty)
  *      element vertex <N>
  *      property float x
  *      property float y
@@ -43,18 +45,22 @@ struct PlyMesh {
  *  Binary vertices are 37 packed bytes each (nine float32, one uint8), faces 13 bytes (count 3,
  *  three uint32). ASCII floats are written with the shortest text that reads back bit-exactly.
  *  A nonzero mobile flag is written as 1. Every span must have one entry per position; `triangles`
- * holds 3 indices per face. Throws qgi::Error naming the path when sizes disagree, an index is out
- * of range, or the file cannot be written. */
+ * holds 3 indices per face. `note` (one line) says what the irradiance holds, for whoever opens
+ * the file. Throws qgi::Error naming the path when sizes disagree, an index is out of range, the
+ * note spans lines, or the file cannot be written. */
 void writePly(const std::filesystem::path& path, std::span<const glm::vec3> positions,
               std::span<const glm::vec3> normals, std::span<const glm::vec3> irradiance,
               std::span<const std::uint8_t> mobile, std::span<const std::uint32_t> triangles = {},
-              PlyFormat format = PlyFormat::BinaryLittleEndian);
+              PlyFormat format = PlyFormat::BinaryLittleEndian, std::string_view note = {});
 
 inline void writePly(const std::filesystem::path& path, const PlyMesh& mesh,
-                     PlyFormat format = PlyFormat::BinaryLittleEndian) {
+                     PlyFormat format = PlyFormat::BinaryLittleEndian, std::string_view note = {}) {
     writePly(path, mesh.positions, mesh.normals, mesh.irradiance, mesh.mobile, mesh.triangles,
-             format);
+             format, note);
 }
+
+/// Whether the file at `path` begins as a PLY file does ("ply" and a line break).
+bool looksLikePly(const std::filesystem::path& path);
 
 /// Reads a file written by writePly (either format). Other PLY layouts are rejected.
 /// Throws qgi::Error naming the path and the offending header line or element.

@@ -61,10 +61,26 @@ void DetpIrradianceSystem::build(Registry& registry) {
         for (const float a : receivers.triangleAreas())
             area += double(a);
         radius = defaultDiscRadius(*info, area, mSettings.photonCount);
-    } else if (const SceneInfo* info = registry.ctx().find<SceneInfo>();
-               info && !info->bounds.empty() && radius > glm::length(info->bounds.extent())) {
-        fail("DETP: DetpSettings.discRadius = ", radius, " m is wider than the whole scene (",
-             glm::length(info->bounds.extent()), " m across): every disc would average all of it");
+    } else {
+        if (const SceneInfo* info = registry.ctx().find<SceneInfo>();
+            info && !info->bounds.empty() && radius > glm::length(info->bounds.extent()))
+            fail("DETP: DetpSettings.discRadius = ", radius, " m is wider than the whole scene (",
+                 glm::length(info->bounds.extent()),
+                 " m across): every disc would average all of it");
+        // Photons spread evenly over every surface would land this often in a disc; the default
+        // radius aims at kDefaultDiscLandings.
+        double area = 0.0;
+        for (const float a : receivers.triangleAreas())
+            area += double(a);
+        const double landings = double(mSettings.photonCount) * glm::pi<double>() * double(radius) *
+                                double(radius) / area;
+        if (mSettings.estimator == IrradianceEstimator::Detp && mSettings.photonCount > 0 &&
+            area > 0.0 && landings < kFewDiscLandings)
+            logWarning("DETP: a disc radius of ", radius, " m catches about ", landings,
+                       " photon landings per disc (", mSettings.photonCount, " photons over ", area,
+                       " m^2; the default radius aims at ", kDefaultDiscLandings,
+                       "): most vertices will read 0 and the rest spikes; widen the radius or "
+                       "shoot more photons");
     }
     auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
     const std::uint32_t staticCount = receivers.staticVertexCount();
@@ -104,9 +120,14 @@ void DetpIrradianceSystem::build(Registry& registry) {
         mobiles += receiver.mobile ? 1 : 0;
         convex += receiver.convex ? 1 : 0;
     }
+    const std::string estimatorRadius =
+        mSettings.estimator == IrradianceEstimator::Detp ? str("disc radius ", mRadius, " m")
+        : mSettings.estimator == IrradianceEstimator::PhotonMap
+            ? str(mSettings.photonMapNeighbours, " nearest hits within ", mPhotonMapRadius, " m")
+            : std::string("per triangle");
     logInfo("DETP: ", irradianceEstimatorName(mSettings.estimator), " over ", vertices,
             " vertices (", staticCount, " static) in ", mReceivers.receivers().size(), " meshes (",
-            mobiles, " mobile, ", convex, " of them convex), disc radius ", mRadius, " m",
+            mobiles, " mobile, ", convex, " of them convex), ", estimatorRadius,
             mSettings.hybrid ? ", hybrid" : "");
 }
 

@@ -314,6 +314,82 @@ TEST(DemoSmoke, SomebodysFileIsNeverTakenForACache) {
     EXPECT_EQ(text, "my notes");
 }
 
+TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
+    const fs::path dir = scratchDir() / "own_files";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path scene = dir / "level.gltf";
+    const fs::path good = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good";
+    fs::copy_file(good / "triangle.gltf", scene);
+    fs::copy_file(good / "triangle.bin", dir / "triangle.bin");
+    const auto size = fs::file_size(scene);
+    for (const char* option : {"--export-irradiance ", "--export-scene ", "--export-avatars "}) {
+        const RunResult run = runDemo("--headless --frames 1 --photons 1000 --scene " +
+                                      scene.string() + " " + option + scene.string());
+        EXPECT_EQ(run.exitCode, 1) << option << run.output;
+        EXPECT_NE(run.output.find("is the scene being loaded"), std::string::npos) << run.output;
+    }
+    EXPECT_EQ(fs::file_size(scene), size);
+
+    // --export-irradiance rewrites an earlier export, never another kind of file.
+    const fs::path notes = dir / "notes.ply";
+    std::ofstream(notes) << "my notes";
+    const RunResult run = runDemo("--scene cornell --headless --frames 1 --photons 1000 "
+                                  "--export-irradiance " +
+                                  notes.string());
+    EXPECT_EQ(run.exitCode, 1) << run.output;
+    EXPECT_NE(run.output.find("is not a PLY file"), std::string::npos) << run.output;
+    EXPECT_EQ(fs::file_size(notes), 8u);
+}
+
+TEST(DemoSmoke, AScreenshotNamedAfterItsImageWritesThatImage) {
+    const fs::path dir = scratchDir() / "named_shot";
+    fs::remove_all(dir);
+    const RunResult run =
+        runDemo("--scene cornell --headless --frames 1 --width 16 --height 16 --photons 0 "
+                "--vlf off --screenshot " +
+                (dir / "shot.png").string() + " --profile " + (dir / "run.json").string());
+    ASSERT_EQ(run.exitCode, 0) << run.output;
+    EXPECT_EQ(readPng(dir / "shot.png").width, 16);
+    EXPECT_TRUE(fs::exists(dir / "shot.exr"));
+    EXPECT_TRUE(fs::exists(dir / "run.json"));
+    EXPECT_TRUE(fs::exists(dir / "run.csv"));
+    EXPECT_FALSE(fs::exists(dir / "shot.png.png"));
+}
+
+// Ctrl-C on a long headless run stops it after the frame in progress and still writes what
+// the frames run produced; the exit code is the shell's for SIGINT.
+TEST(DemoSmoke, AnInterruptedRunStillWritesItsOutputs) {
+    const fs::path dir = scratchDir() / "interrupted";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path log = dir / "log.txt";
+    const std::string demo = std::string(QGI_DEMO_PATH) +
+                             " --scene cornell --headless --frames 100000 --width 16 --height 16 "
+                             "--photons 1000 --vlf off --profile " +
+                             (dir / "run").string() + " --export-irradiance " +
+                             (dir / "light.ply").string();
+    // Started in the background; interrupted once its frames have begun.
+    const std::string script = demo + " > " + log.string() + " 2>&1 & pid=$!; " +
+                               "for i in $(seq 600); do grep -q 'ready in' " + log.string() +
+                               " && break; sleep 0.1; done; sleep 0.5; kill -INT $pid; wait $pid";
+    const fs::path file = dir / "interrupt.sh";
+    std::ofstream(file) << script << "\n";
+    const int status = std::system(("timeout 120 sh " + file.string()).c_str());
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 130);
+    std::ifstream in(log);
+    const std::string output((std::istreambuf_iterator<char>(in)), {});
+    EXPECT_NE(output.find("stopped after"), std::string::npos) << output;
+    EXPECT_FALSE(readPly(dir / "light.ply").positions.empty());
+    std::ifstream csv(dir / "run.csv");
+    std::size_t rows = 0;
+    for (std::string line; std::getline(csv, line);)
+        ++rows;
+    EXPECT_GT(rows, 1u);
+    EXPECT_LT(rows, 100000u);
+}
+
 TEST(DemoSmoke, SceneWithoutCameraGetsADefaultOne) {
     const fs::path triangle = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good" / "triangle.gltf";
     const std::string base = (scratchDir() / "triangle").string();

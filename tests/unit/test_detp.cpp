@@ -1253,6 +1253,25 @@ TEST(Detp, DefaultRadiusComesFromTheScene) {
     EXPECT_NO_THROW(wideEnough.build(registry));
 }
 
+TEST(Detp, AHandChosenRadiusThatCatchesFewPhotonsIsWarnedAbout) {
+    // The unit floor (1 m^2) and 10,000 photons: a disc of 1 cm catches about 3 landings, one
+    // of 2 cm about 13. Only the first is warned about (fewer than kFewDiscLandings).
+    for (const float radius : {0.01f, 0.02f}) {
+        Registry registry;
+        addDetpResources(registry);
+        addUnitFloor(registry, 4);
+        DetpSettings settings;
+        settings.discRadius = radius;
+        settings.photonCount = 10'000;
+        DetpIrradianceSystem system(settings);
+        ::testing::internal::CaptureStderr();
+        system.build(registry);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_EQ(log.find("photon landings per disc") != std::string::npos, radius == 0.01f)
+            << log;
+    }
+}
+
 TEST(Detp, FlippedNormalsAreNamed) {
     // A floor wound to face up whose normals point down reads dark from above: a warning
     // names it. The same floor with its normals right says nothing.
