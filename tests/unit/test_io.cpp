@@ -160,6 +160,22 @@ TEST_F(IoTest, PlyWithoutFacesHasTheDocumentedHeader) {
     expectSame(readPly(mDir / "points.ply"), mesh);
 }
 
+TEST_F(IoTest, PlyNoteIsAHeaderCommentThatReadsBack) {
+    const PlyMesh mesh = randomPly(mRandom, 5, 2);
+    writePly(mDir / "noted.ply", mesh, PlyFormat::BinaryLittleEndian, "hybrid mode: indirect");
+    std::ifstream file(mDir / "noted.ply", std::ios::binary);
+    std::string text((std::istreambuf_iterator<char>(file)), {});
+    EXPECT_NE(text.find("W/m^2\ncomment hybrid mode: indirect\nelement vertex 5\n"),
+              std::string::npos);
+    expectSame(readPly(mDir / "noted.ply"), mesh);
+    EXPECT_TRUE(looksLikePly(mDir / "noted.ply"));
+    expectErrorNaming([&] { writePly(mDir / "bad.ply", mesh, PlyFormat::Ascii, "two\nlines"); },
+                      mDir / "bad.ply");
+    std::ofstream(mDir / "notes.txt") << "my notes";
+    EXPECT_FALSE(looksLikePly(mDir / "notes.txt"));
+    EXPECT_FALSE(looksLikePly(mDir / "missing.ply"));
+}
+
 TEST_F(IoTest, WritesToAMissingFolderThrowNamingThePath) {
     const fs::path missing = mDir / "no_such_folder";
     const std::vector<float> rgba(4, 1.f);
