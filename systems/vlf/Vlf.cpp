@@ -5,6 +5,7 @@
 
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -210,6 +211,18 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
                 }
         }
     }
+    // Settings within their ranges can still ask for more than the machine has: say so before
+    // the big arrays.
+    const VlfMemory need = v.memory();
+    const double limit = settings.maxBakeBytes > 0 ? double(settings.maxBakeBytes)
+                                                   : 0.5 * double(::sysconf(_SC_PHYS_PAGES)) *
+                                                         double(::sysconf(_SC_PAGESIZE));
+    if (limit > 0.0 && double(need.bakeBytes) > limit)
+        fail("VLF: baking ", need.directions, " directions at ", settings.linesPerSide, "x",
+             settings.linesPerSide, " lines (direction level ", settings.directionLevel,
+             ") needs about ", double(need.bakeBytes) / 1e9, " GB, over the ", limit / 1e9,
+             " GB allowed (VlfSettings.maxBakeBytes; by default half of this machine's memory): "
+             "lower the direction level or the lines per side");
     v.mTiles.assign(v.mTileCount * std::size_t(m) * m, glm::vec4(0.f));
     return v;
 }

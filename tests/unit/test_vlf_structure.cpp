@@ -223,6 +223,23 @@ VlfSettings tiledSettings() {
 
 } // namespace
 
+TEST(VlfTiling, ABakeThatWouldNeedMoreMemoryThanAllowedFailsBeforeAllocating) {
+    const auto scene = glossyRoom();
+    VlfSettings s = tiledSettings();
+    const std::size_t need = Vlf::allocate(*scene, s).memory().bakeBytes;
+    s.maxBakeBytes = need; // exactly enough
+    EXPECT_NO_THROW(Vlf::allocate(*scene, s));
+    s.maxBakeBytes = need - 1;
+    try {
+        Vlf::allocate(*scene, s);
+        ADD_FAILURE() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("lower the direction level or the lines per side"),
+                  std::string::npos)
+            << e.what();
+    }
+}
+
 TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
     const auto scene = glossyRoom();
     const VlfSettings s = tiledSettings();
