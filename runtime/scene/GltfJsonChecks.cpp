@@ -349,8 +349,17 @@ void GltfReader::checkUri(const nlohmann::json& object, const std::string& secti
                      "' (a URI reads '+' as a space); to name the file with a plus, write it as "
                      "%2B");
         }
+        if (fs::exists(file, error)) fail(field, "'", uri, "' is not a regular file");
         fail(field, "'", uri, "' not found next to the scene");
     }
+    // A link (the file, or a folder on its way) may lead anywhere: the file must really lie in
+    // the scene's folder.
+    const fs::path real = fs::canonical(file, error);
+    const fs::path folder = fs::canonical(mFolder, error);
+    if (error) fail(field, "cannot resolve '", uri, "': ", error.message());
+    const fs::path inside = real.lexically_relative(folder);
+    if (inside.empty() || *inside.begin() == "..")
+        fail(field, "'", uri, "' is a link that leaves the scene's folder");
     const std::uintmax_t size = fs::file_size(file, error);
     if (error) fail(field, "cannot read '", uri, "': ", error.message());
     if (size > kGltfMaxFileBytes)

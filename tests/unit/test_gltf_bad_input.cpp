@@ -230,6 +230,36 @@ TEST(GltfBadInput, APlusInAFileNameIsExplained) {
     EXPECT_GT(registry.aliveCount(), 0u);
 }
 
+TEST(GltfBadInput, ALinkOutOfTheScenesFolderIsRefused) {
+    // A scene folder holding links: to a file outside it (a level that reads /etc/passwd), to
+    // a device, and to a buffer of its own (harmless: it loads).
+    const fs::path folder = scratchFile("linked_level");
+    fs::remove_all(folder);
+    fs::create_directories(folder / "sub");
+    const fs::path outside = scratchFile("outside.bin");
+    fs::copy_file(kData / "good" / "triangle.bin", outside, fs::copy_options::overwrite_existing);
+    fs::copy_file(kData / "good" / "triangle.bin", folder / "sub" / "own.bin");
+    fs::create_symlink(outside, folder / "out.bin");
+    fs::create_symlink("/dev/zero", folder / "zero.bin");
+    fs::create_symlink(folder / "sub" / "own.bin", folder / "own.bin");
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const auto withUri = [&](const std::string& uri) {
+        std::string edited = text;
+        const std::string from = R"("uri": "triangle.bin")";
+        edited.replace(edited.find(from), from.size(), R"("uri": ")" + uri + R"(")");
+        const fs::path scene = folder / (uri + ".gltf");
+        std::ofstream(scene) << edited;
+        return scene;
+    };
+    EXPECT_THAT(importFailure(withUri("out.bin")),
+                HasSubstr("is a link that leaves the scene's folder"));
+    EXPECT_THAT(importFailure(withUri("zero.bin")), HasSubstr("is not a regular file"));
+    Registry registry;
+    EXPECT_NO_THROW(importGltf(registry, withUri("own.bin"), kNoRefinement));
+    EXPECT_GT(registry.aliveCount(), 0u);
+}
+
 TEST(GltfBadInput, FailureWhileProcessingMeshesLeavesTheRegistryEmpty) {
     // A 1 um edge bound would refine the triangle into ~10^12 pieces: processMesh refuses,
     // after everything else in the file has been read.
