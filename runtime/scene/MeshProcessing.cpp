@@ -3,6 +3,7 @@
 #include "runtime/core/Error.h"
 
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/System/omstream.hh>
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
 #include <glm/vec3.hpp>
@@ -186,7 +187,7 @@ glm::vec3 toGlm(const OmMesh::Point& p) {
 
 // True when OpenMesh's add_face would accept the triangle: each corner is new or on a
 // boundary, and no directed edge already carries a face. Checked up front because a refused
-// add_face prints to OpenMesh's error stream.
+// add_face prints to OpenMesh's error stream (see buildHalfedgeMesh).
 bool fitsManifold(const OmMesh& mesh, const std::array<OmMesh::VertexHandle, 3>& v) {
     for (int i = 0; i < 3; ++i) {
         if (!mesh.is_boundary(v[std::size_t(i)])) return false;
@@ -201,6 +202,16 @@ bool fitsManifold(const OmMesh& mesh, const std::array<OmMesh::VertexHandle, 3>&
 /// corners: it stays in the mesh, only unconnected to its neighbours.
 OmMesh buildHalfedgeMesh(const WeldedVertices& welded, const std::vector<Triangle>& triangles,
                          std::vector<glm::vec2>& uvs) {
+    // A face add_face refuses is handled here (it gets its own corners), but OpenMesh also
+    // reports it on its error stream, past the log's level and prefix: fitsManifold() spares
+    // most refusals, and the stream is silenced for the rest (a corner whose boundary gaps
+    // cannot be re-linked, which fitsManifold() does not model). qgi uses no other part of
+    // OpenMesh that reports there.
+    static const bool silenced = [] {
+        omerr().disable();
+        return true;
+    }();
+    (void)silenced;
     const bool hasUvs = !welded.uvs.empty();
     OmMesh mesh;
     mesh.reserve(welded.positions.size(), triangles.size() * 3 / 2 + 3, triangles.size());
