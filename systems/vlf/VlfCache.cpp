@@ -219,7 +219,10 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
 Vlf VlfCache::loadOrBake(const VlfScene& scene, const VlfSettings& settings,
                          const std::filesystem::path& path, bool* baked, VlfBakeStats* stats) {
     validate(settings);
-    if (!path.empty()) {
+    std::error_code error;
+    if (!path.empty() && !std::filesystem::exists(path, error)) {
+        logInfo("VLF: no cache file ", path.string(), " yet: baking, then writing it");
+    } else if (!path.empty()) {
         try {
             Vlf v = load(path, vlfKey(scene, settings));
             if (baked) *baked = false;

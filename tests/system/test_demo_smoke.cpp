@@ -130,14 +130,14 @@ struct ExportedLight {
     double staticFlux = 0.0;
 };
 
-/// Runs the demo on the Cornell box for three frames (its block moves on its scripted path)
+/// Runs the demo on the Cornell box for `frames` frames (its block moves on its scripted path)
 /// with 20k photons, `options` added, and reads the PLY it writes after the last frame.
-ExportedLight exportLight(const std::string& name, const std::string& options) {
+ExportedLight exportLight(const std::string& name, const std::string& options, int frames = 3) {
     const fs::path ply = scratchDir() / (name + ".ply");
     fs::remove(ply);
     ExportedLight light;
-    const RunResult run = runDemo("--scene cornell --headless --frames 3 --width 32 --height 32 "
-                                  "--photons 20000 --seed 7 --vlf off " +
+    const RunResult run = runDemo("--scene cornell --headless --frames " + std::to_string(frames) +
+                                  " --width 32 --height 32 --photons 20000 --seed 7 --vlf off " +
                                   options + " --export-irradiance " + ply.string());
     light.output = run.output;
     EXPECT_EQ(run.exitCode, 0) << options << ": " << run.output;
@@ -212,6 +212,20 @@ TEST(DemoSmoke, LightingOptionsReachTheExportedIrradiance) {
             }
         }
     EXPECT_LE(differing, 20u);
+
+    // No lag: a frame earlier the block stood elsewhere and the light around it differed, so
+    // the third frame's light, equal to a full recompute's, follows the block's third pose.
+    const ExportedLight earlier = exportLight("light_frame2", "--mode photon", 2);
+    ASSERT_EQ(earlier.ply.positions.size(), base.ply.positions.size());
+    std::size_t blockMoved = 0, staticChanged = 0;
+    for (std::size_t v = 0; v < base.ply.positions.size(); ++v) {
+        if (base.ply.mobile[v])
+            blockMoved += earlier.ply.positions[v] != base.ply.positions[v] ? 1 : 0;
+        else
+            staticChanged += earlier.ply.irradiance[v] != base.ply.irradiance[v] ? 1 : 0;
+    }
+    EXPECT_EQ(blockMoved, mobileVertices) << "the block did not move between frames 2 and 3";
+    EXPECT_GT(staticChanged, 100u) << "the light around the block did not change";
 
     // Another estimator or radius: a different estimate of the same light. Their totals may
     // differ by their biases at the box's edges and corners (a few per cent) and by noise
