@@ -16,6 +16,8 @@
 //    active camera is written as cameras[0], which the importer makes active.
 //  - TextureLibrary images are embedded as PNG data URIs (tinygltf's writer, through stb), one
 //    texture per image, so Material::baseColorTexture keeps its index.
+//  - the scene's suggested exposure (SceneInfo::exposure), when not 1, goes to the scene's
+//    extras {"exposure": x}.
 
 #include "runtime/scene/SceneLoader.h"
 
@@ -315,6 +317,9 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
     }
     tinygltf::Scene scene;
     scene.nodes = std::move(roots);
+    if (const SceneInfo* info = registry.ctx().find<SceneInfo>(); info && info->exposure != 1.f)
+        scene.extras = tinygltf::Value(
+            tinygltf::Value::Object{{"exposure", tinygltf::Value(double(info->exposure))}});
     model.scenes.push_back(std::move(scene));
     model.defaultScene = 0;
 

@@ -344,6 +344,18 @@ std::vector<int> GltfReader::checkNodeGraph() const {
     return parents;
 }
 
+float GltfReader::sceneExposure() const {
+    if (mModel.scenes.empty()) return 1.f;
+    const int index = std::max(mModel.defaultScene, 0);
+    const tinygltf::Value& extras = mModel.scenes[std::size_t(index)].extras;
+    if (!extras.IsObject() || !extras.Has("exposure")) return 1.f;
+    const tinygltf::Value& exposure = extras.Get("exposure");
+    const double value = exposure.IsNumber() ? exposure.GetNumberAsDouble() : -1.0;
+    if (!(value > 0.0 && value <= 1e6))
+        fail(str("scenes[", index, "].extras.exposure"), "must be a number in (0, 1e6]");
+    return float(value);
+}
+
 std::vector<int> GltfReader::sceneRoots(const std::vector<int>& parents) const {
     std::vector<int> roots;
     if (mModel.scenes.empty()) { // no scene: every root node
@@ -713,6 +725,7 @@ ImportedScene GltfReader::read() {
     processMeshes(scene);
     scene.info.name = mPath.stem().string();
     scene.info.source = mPath.string();
+    scene.info.exposure = sceneExposure();
     return scene;
 }
 

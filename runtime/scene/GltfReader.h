@@ -210,6 +210,8 @@ private:
     /// cycles and depth.
     std::vector<int> checkNodeGraph() const;
     std::vector<int> sceneRoots(const std::vector<int>& parents) const;
+    /// The scene's extras {"exposure": x} (a finite x > 0), else 1.
+    float sceneExposure() const;
     Transform localTransform(int index) const;
     std::optional<Mobility> nodeMobility(int index) const;
     bool nodeStandIn(int index) const;

@@ -230,6 +230,24 @@ TEST(GltfBadInput, APlusInAFileNameIsExplained) {
     EXPECT_GT(registry.aliveCount(), 0u);
 }
 
+TEST(GltfBadInput, ASceneExposureThatIsNoPositiveNumberIsNamed) {
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string from = R"("scenes": [)";
+    ASSERT_NE(text.find(from), std::string::npos);
+    for (const char* exposure : {R"("bright")", "-1", "0"}) {
+        std::string edited = text;
+        const std::size_t scene = edited.find("{", edited.find(from));
+        edited.insert(scene + 1, std::string(R"("extras": {"exposure": )") + exposure + "}, ");
+        std::ofstream(scratchFile("exposure.gltf")) << edited;
+        fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                      fs::copy_options::overwrite_existing);
+        EXPECT_THAT(importFailure(scratchFile("exposure.gltf")),
+                    HasSubstr("scenes[0].extras.exposure"))
+            << exposure;
+    }
+}
+
 TEST(GltfBadInput, ALinkOutOfTheScenesFolderIsRefused) {
     // A scene folder holding links: to a file outside it (a level that reads /etc/passwd), to
     // a device, and to a buffer of its own (harmless: it loads).

@@ -264,7 +264,7 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
 INSTANTIATE_TEST_SUITE_P(Formats, GltfExport, ::testing::Values(".gltf", ".glb"),
                          [](const auto& test) { return std::string(test.param + 1); });
 
-TEST(GltfExportErrors, TheAtriumExportedAndLoadedAgainPrintsNothing) {
+TEST(GltfExportErrors, TheAtriumExportedAndLoadedAgainPrintsNothingAndKeepsItsExposure) {
     // Refining the exported atrium again meets corners whose boundary OpenMesh cannot re-link;
     // those triangles get their own corners, and nothing reaches the terminal but the log.
     Registry atrium;
@@ -278,6 +278,9 @@ TEST(GltfExportErrors, TheAtriumExportedAndLoadedAgainPrintsNothing) {
     const std::string log = ::testing::internal::GetCapturedStderr();
     EXPECT_EQ(log.find("add_face"), std::string::npos) << log.substr(0, 500);
     EXPECT_EQ(again.count<Mesh>(), atrium.count<Mesh>());
+    // The built-in scene's suggested exposure goes with it (the scene's extras).
+    EXPECT_EQ(again.ctx().get<SceneInfo>().exposure, atrium.ctx().get<SceneInfo>().exposure);
+    EXPECT_NE(again.ctx().get<SceneInfo>().exposure, 1.f);
 }
 
 TEST(GltfExportErrors, UnknownExtensionAndUnwritablePathThrow) {
