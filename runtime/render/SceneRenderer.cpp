@@ -137,17 +137,21 @@ void SceneRenderer::render(const RenderScene& scene, FrameProfiler* profiler,
                            std::uint64_t frameIndex) {
     mTimer.beginFrame(profiler, frameIndex);
     std::span<const RenderLight> lights = scene.lights;
-    if (lights.size() > std::size_t(kMaxLights)) {
-        if (!mWarnedLightLimit)
-            logWarning(lights.size(), " lights: only the first ", kMaxLights, " are drawn");
-        mWarnedLightLimit = true;
-        lights = lights.first(kMaxLights);
-    }
-    if (mSettings.mode == ShadingMode::Photon)
+    if (mSettings.mode == ShadingMode::Photon) {
         lights = {}; // all light is in the per-vertex irradiance
-    else
+    } else {
+        if (lights.size() > std::size_t(kMaxLights)) {
+            if (!mWarnedLightLimit)
+                logWarning(lights.size(),
+                           " lights: the shader draws the direct light of the first ", kMaxLights,
+                           " only; the others light the scene through photons (light "
+                           "that reflected) alone");
+            mWarnedLightLimit = true;
+            lights = lights.first(kMaxLights);
+        }
         mShadows.update(lights, scene.items, scene.staticCastersChanged,
                         scene.movableCastersChanged, mTimer);
+    }
     uploadLights(lights);
     {
         PassTimer::Scope pass(mTimer, "render/scene");
