@@ -249,6 +249,12 @@ void GltfReader::checkTypes(const nlohmann::json& document) const {
                  {"byteLength", Kind::Index},
                  {"byteStride", Kind::Index},
                  {"target", Kind::Index}});
+        // tinygltf refuses a stride out of range saying only "must be the multiple of 4".
+        if (const auto stride = o.find("byteStride"); stride != o.end()) {
+            const auto value = stride->get<std::uint64_t>();
+            if (value < 4 || value > 252 || value % 4 != 0)
+                fail(join(at, "byteStride"), value, " is not a multiple of 4 in [4, 252]");
+        }
     });
     each(document, "", "buffers", [&](const Json& o, const std::string& at) {
         members(o, at, {{"byteLength", Kind::Index}, {"uri", Kind::String}});

@@ -248,6 +248,24 @@ TEST(GltfBadInput, ASceneExposureThatIsNoPositiveNumberIsNamed) {
     }
 }
 
+TEST(GltfBadInput, AStrideOutOfRangeIsNamedWithItsRange) {
+    // (tinygltf's own message says only "must be the multiple of 4", also of 256.)
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                  fs::copy_options::overwrite_existing);
+    for (const char* stride : {"256", "6", "2"}) {
+        std::string edited = text;
+        const std::string from = R"("buffer": 0,)";
+        edited.replace(edited.find(from), from.size(),
+                       std::string(R"("buffer": 0, "byteStride": )") + stride + ",");
+        std::ofstream(scratchFile("stride.gltf")) << edited;
+        EXPECT_THAT(importFailure(scratchFile("stride.gltf")),
+                    HasSubstr("bufferViews[0].byteStride: " + std::string(stride) +
+                              " is not a multiple of 4 in [4, 252]"));
+    }
+}
+
 TEST(GltfBadInput, ALinkOutOfTheScenesFolderIsRefused) {
     // A scene folder holding links: to a file outside it (a level that reads /etc/passwd), to
     // a device, and to a buffer of its own (harmless: it loads).
