@@ -404,6 +404,34 @@ TEST(DemoSmoke, AnInterruptedRunStillWritesItsOutputs) {
     EXPECT_LT(rows, 100000u);
 }
 
+TEST(DemoSmoke, CameraPathsAreReadStrictly) {
+    const fs::path dir = scratchDir() / "camera_paths";
+    fs::create_directories(dir);
+    const auto run = [&](const std::string& name, const std::string& text) {
+        std::ofstream(dir / name) << text;
+        return runDemo("--scene cornell --headless --frames 2 --width 16 --height 16 --photons 0 "
+                       "--vlf off --quiet --camera-path " +
+                       (dir / name).string());
+    };
+    EXPECT_EQ(run("good.csv", "time,x,y,z,yaw_deg,pitch_deg\n0,0,0.3,1,0,0\n1,0.1,0.3,1,10,-5\n")
+                  .exitCode,
+              0);
+    for (const auto& [name, text, says] :
+         {std::tuple{"garbage.csv", "hello world\n0,0,0.3,1,0,0\n", "expected six numbers"},
+          std::tuple{"seven.csv", "0,0,0.3,1,0,0,7\n", "expected six numbers"},
+          std::tuple{"pitch.csv", "0,0,0.3,1,0,95\n", "past straight up or down"},
+          std::tuple{"backwards.csv", "1,0,0.3,1,0,0\n0,0,0.3,1,0,0\n", "times must increase"}}) {
+        const RunResult result = run(name, text);
+        EXPECT_EQ(result.exitCode, 1) << name << ": " << result.output;
+        EXPECT_NE(result.output.find(says), std::string::npos) << name << ": " << result.output;
+    }
+    const RunResult folder = runDemo("--scene cornell --headless --frames 1 --photons 0 --vlf off "
+                                     "--camera-path " +
+                                     dir.string());
+    EXPECT_EQ(folder.exitCode, 1) << folder.output;
+    EXPECT_NE(folder.output.find("is not a file"), std::string::npos) << folder.output;
+}
+
 TEST(DemoSmoke, SceneWithoutCameraGetsADefaultOne) {
     const fs::path triangle = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good" / "triangle.gltf";
     const std::string base = (scratchDir() / "triangle").string();
