@@ -79,6 +79,9 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                  "F12 takes a screenshot, Esc quits.",
                  "qgi-demo"};
     app.option_defaults()->always_capture_default();
+    // An option given twice takes its last value, as in most tools (and wrapper scripts that
+    // append to defaults).
+    app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     app.add_option("--scene", o.scene, "Built-in scene (" + builtinList() + ") or a .gltf/.glb file");
     app.add_flag("--headless", o.headless,
                  "Render offscreen (hidden window), follow the scripted camera path with a fixed time step");

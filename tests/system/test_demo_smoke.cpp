@@ -260,8 +260,10 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
 }
 
 TEST(DemoSmoke, WholeNumbersMayBeWrittenInScientificForm) {
-    // "--photons 1e6" is a million; the run then stops at --help.
+    // "--photons 1e6" is a million; the run then stops at --help. An option given twice takes
+    // its last value.
     EXPECT_EQ(runDemo("--photons 1e6 --frames 1e1 --help").exitCode, 0);
+    EXPECT_EQ(runDemo("--frames 2 --frames 3 --help").exitCode, 0);
     // Leading zeros are decimal (CLI11 alone would read 010 as octal 8): ten frames profiled.
     const std::string base = (scratchDir() / "ten").string();
     ASSERT_EQ(runDemo("--scene cornell --headless --frames 010 --width 16 --height 16 "
