@@ -19,6 +19,7 @@
 #include "runtime/io/IrradianceExport.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GlWindow.h"
+#include "runtime/scene/BuiltinScenes.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneLoader.h"
 #include "runtime/scene/SceneQueries.h"
@@ -37,6 +38,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -110,29 +113,33 @@ void applyCameraPath(Registry& registry, const std::string& choice) {
     registry.emplaceOrReplace<PathFollower>(camera, loadCameraPath(choice));
 }
 
-/// Makes sure an output's folder exists and can be written, before a long run rather than
-/// after it. Throws qgi::Error naming the option.
 /// What --export-irradiance holds, in each mode (a comment in the PLY header).
 constexpr const char* kPhotonExportNote = "photon mode: all light, from photons";
 constexpr const char* kHybridExportNote =
     "hybrid mode: the direct light of the lights the renderer draws (point, spot and "
-    "directional lights, emissive surfaces with a light stand-in) is left out; the rest, light "
-    "that reflected at least once, is in";
+    "directional lights, emissive surfaces with a light stand-in) is left out; the rest (light "
+    "that reflected at least once, and the direct light of emissive surfaces without a stand-in) "
+    "is in";
 
-/// The signal that asked the frame loop to stop (SIGINT or SIGTERM), or 0.
-volatile std::sig_atomic_t gInterrupt = 0;
+/// The signal that asked the frame loop to stop (SIGINT or SIGTERM), or 0. Lock-free, so the
+/// handler may set it on any thread.
+std::atomic<int> gInterrupt{0};
+static_assert(std::atomic<int>::is_always_lock_free);
 
 extern "C" void onInterrupt(int signal) {
-    gInterrupt = signal;
+    const int savedErrno = errno;
+    gInterrupt.store(signal, std::memory_order_relaxed);
     constexpr char kMessage[] =
         "\nqgi-demo: interrupted: stopping after this frame and writing the outputs (again to "
         "quit at once)\n";
     [[maybe_unused]] const ssize_t written = ::write(2, kMessage, sizeof kMessage - 1);
+    errno = savedErrno;
 }
 
 /// While alive, Ctrl-C (SIGINT) and SIGTERM end the frame loop after the frame in progress, so
 /// that the outputs of the frames run are written; a second one ends the process at once (the
-/// handlers are one-shot). Before the loop (a long bake) the defaults stand.
+/// handlers are one-shot). A signal the process was started ignoring (a background job's
+/// SIGINT) stays ignored. Before the loop (a long bake) the defaults stand.
 class InterruptGuard {
 public:
     InterruptGuard() {
@@ -140,20 +147,21 @@ public:
         struct sigaction action {};
         action.sa_handler = onInterrupt;
         sigemptyset(&action.sa_mask);
-        action.sa_flags = SA_RESETHAND;
-        sigaction(SIGINT, &action, &mPreviousInt);
-        sigaction(SIGTERM, &action, &mPreviousTerm);
+        action.sa_flags = SA_RESETHAND | SA_RESTART;
+        for (auto& [signal, previous] : mPrevious) {
+            sigaction(signal, nullptr, &previous);
+            if (previous.sa_handler != SIG_IGN) sigaction(signal, &action, nullptr);
+        }
     }
     ~InterruptGuard() {
-        sigaction(SIGINT, &mPreviousInt, nullptr);
-        sigaction(SIGTERM, &mPreviousTerm, nullptr);
+        for (const auto& [signal, previous] : mPrevious)
+            sigaction(signal, &previous, nullptr);
     }
     InterruptGuard(const InterruptGuard&) = delete;
     InterruptGuard& operator=(const InterruptGuard&) = delete;
 
 private:
-    struct sigaction mPreviousInt {};
-    struct sigaction mPreviousTerm {};
+    std::pair<int, struct sigaction> mPrevious[2] = {{SIGINT, {}}, {SIGTERM, {}}};
 };
 
 /// Checks an output option before the run: a file path (or, `extended`, a base path that
@@ -171,7 +179,7 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
     for (const char* extension : extensions)
         files.emplace_back(*base + extension);
     for (const fs::path& file : files) {
-        if (fs::exists(file, error) && fs::equivalent(file, scene, error))
+        if (!isBuiltinScene(scene) && fs::exists(file, error) && fs::equivalent(file, scene, error))
             fail(option, ": '", file.string(),
                  "' is the scene being loaded (--scene); not "
                  "overwritten");
@@ -225,9 +233,9 @@ int runDemo(const DemoOptions& options) {
     prepareOutput(options.exportAvatars, "--export-avatars", options.scene);
     // An earlier export is rewritten; any other file is somebody's.
     if (options.exportIrradiance && std::filesystem::exists(*options.exportIrradiance) &&
-        !looksLikePly(*options.exportIrradiance))
+        !isIrradiancePly(*options.exportIrradiance))
         fail("--export-irradiance: '", *options.exportIrradiance,
-             "' exists and is not a PLY file; not overwritten");
+             "' exists and is not an irradiance export of qgi's; not overwritten");
     // Cache files are rewritten when stale: never over somebody's file.
     if (!options.pointCacheFile.empty())
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
@@ -341,10 +349,9 @@ int runDemo(const DemoOptions& options) {
     const InterruptGuard interruptGuard;
     for (std::uint64_t f = 0; options.frames == 0 || f < std::uint64_t(options.frames); ++f) {
         if (gInterrupt) {
-            logWarning("stopped after ", f, " of ", options.frames, " frames",
-                       options.screenshot && options.headless
-                           ? ": no screenshot (it is taken after the last frame)"
-                           : "");
+            logWarning(
+                "stopped after ", f, options.frames ? str(" of ", options.frames) : "", " frames",
+                options.screenshot ? ": no screenshot (it is taken after the last frame)" : "");
             break;
         }
         window.pollEvents();
@@ -412,7 +419,14 @@ int runDemo(const DemoOptions& options) {
         });
     if (!failures.empty()) fail(failures);
     if (!options.quiet) std::printf("\n%s", profiler.summaryTable().c_str());
-    return gInterrupt ? 128 + int(gInterrupt) : 0; // the shell's code for a signal
+    if (const int signal = gInterrupt) {
+        // End by the signal itself, as its default would have: a shell loop or make stops on a
+        // child killed by SIGINT, not on one that exits with 130.
+        std::fflush(nullptr);
+        std::signal(signal, SIG_DFL);
+        std::raise(signal);
+    }
+    return 0;
 }
 
 } // namespace qgi::demo

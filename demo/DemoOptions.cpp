@@ -147,8 +147,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         return CLI::Validator(
             [extensions = std::move(extensions)](std::string& value) {
                 for (const std::string& extension : extensions)
-                    if (value.size() > extension.size() && value.ends_with(extension))
+                    if (value.size() > extension.size() && value.ends_with(extension)) {
                         value.resize(value.size() - extension.size());
+                        break; // one extension: a.png.exr is the base a.png
+                    }
                 return std::string{};
             },
             "", "base path");
@@ -166,7 +168,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--export-irradiance", o.exportIrradiance,
                    "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
                    "er eg eb (W/m^2) and a mobile flag per vertex. In hybrid mode it leaves out "
-                   "the direct light the renderer draws (of point, spot and directional lights); "
+                   "the direct light the renderer draws (of point, spot and directional lights, "
+                   "and of emissive surfaces with a light stand-in); "
                    "--mode photon exports all light. An existing file that is not a PLY is not "
                    "overwritten");
     app.add_option("--vlf", o.vlf,

@@ -168,11 +168,15 @@ void writePly(const std::filesystem::path& path, std::span<const glm::vec3> posi
     if (!file) fail("cannot write PLY '", path.string(), "'");
 }
 
-bool looksLikePly(const std::filesystem::path& path) {
+bool isIrradiancePly(const std::filesystem::path& path) {
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(path, error)) return false; // a FIFO would block
     std::ifstream file(path, std::ios::binary);
-    char magic[4] = {};
-    return file.read(magic, 4) && magic[0] == 'p' && magic[1] == 'l' && magic[2] == 'y' &&
-           (magic[3] == '\n' || magic[3] == '\r');
+    std::string head(160, '\0');
+    file.read(head.data(), std::streamsize(head.size()));
+    head.resize(std::size_t(file.gcount()));
+    return head.starts_with("ply\nformat ") &&
+           head.find("\ncomment qgi vertex irradiance: ") != std::string::npos;
 }
 
 PlyMesh readPly(const std::filesystem::path& path) {

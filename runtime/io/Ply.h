@@ -59,8 +59,9 @@ inline void writePly(const std::filesystem::path& path, const PlyMesh& mesh,
              format, note);
 }
 
-/// Whether the file at `path` begins as a PLY file does ("ply" and a line break).
-bool looksLikePly(const std::filesystem::path& path);
+/// Whether `path` is a regular file that begins as writePly's do (the "ply" line, a format
+/// line and qgi's comment): an earlier export, which may be rewritten.
+bool isIrradiancePly(const std::filesystem::path& path);
 
 /// Reads a file written by writePly (either format). Other PLY layouts are rejected.
 /// Throws qgi::Error naming the path and the offending header line or element.

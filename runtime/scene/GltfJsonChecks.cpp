@@ -359,12 +359,18 @@ void GltfReader::checkUri(const nlohmann::json& object, const std::string& secti
         fail(field, "'", uri, "' not found next to the scene");
     }
     // A link (the file, or a folder on its way) may lead anywhere: the file must really lie in
-    // the scene's folder.
-    const fs::path real = fs::canonical(file, error);
-    const fs::path folder = fs::canonical(mFolder, error);
-    if (error) fail(field, "cannot resolve '", uri, "': ", error.message());
-    const fs::path inside = real.lexically_relative(folder);
-    if (inside.empty() || *inside.begin() == "..")
+    // the scene's folder, as named or as its own link resolves (a scene given through a link
+    // whose files are links beside the real one).
+    std::error_code fileError, folderError, sceneError;
+    const fs::path real = fs::canonical(file, fileError);
+    if (fileError) fail(field, "cannot resolve '", uri, "': ", fileError.message());
+    const auto within = [&](const fs::path& folder) {
+        const fs::path inside = real.lexically_relative(folder);
+        return !inside.empty() && *inside.begin() != "..";
+    };
+    const fs::path folder = fs::canonical(mFolder, folderError);
+    const fs::path sceneFolder = fs::canonical(mPath, sceneError).parent_path();
+    if (!(!folderError && within(folder)) && !(!sceneError && within(sceneFolder)))
         fail(field, "'", uri, "' is a link that leaves the scene's folder");
     const std::uintmax_t size = fs::file_size(file, error);
     if (error) fail(field, "cannot read '", uri, "': ", error.message());

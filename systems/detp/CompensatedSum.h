@@ -9,10 +9,10 @@ namespace qgi {
  *  two (Ogita, Rump and Oishi's Sum2). After n additions of terms x_i, value() is within
  *      2^-53 |S| + (n 2^-53)^2 sum |x_i|
  *  of the exact sum S, per channel, in any order (plain summation: (n - 1) 2^-53 sum |x_i|).
- *  With n additions of at most p each that is 2^-53 |S| + n^3 2^-106 p: at n = 2^30 a
- *  sixty-five-thousandth of one term. So an incremental sum that has added and subtracted for
- *  hours stays the fresh sum to the float it is published in, and large terms that came and
- *  went (a mobile parked in the light, then moved away) leave nothing behind.
+ *  With n additions of at most p each that is 2^-53 |S| + n^3 2^-106 p: at n = 2^30, 2^-53 |S|
+ *  plus a sixty-five-thousandth of the largest term, under the rounding of the float the sum is
+ *  published in (2^-24 |S|) wherever |S| is at least 256 p. Large terms that came and went (a
+ *  mobile parked in the light, then moved away) no longer swamp the small ones that stayed.
  *  Needs IEEE double arithmetic as written (no -ffast-math, which would fold the error away). */
 struct CompensatedSum {
     glm::dvec3 sum{0.0};

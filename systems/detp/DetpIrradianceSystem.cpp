@@ -79,8 +79,8 @@ void DetpIrradianceSystem::build(Registry& registry) {
             logWarning("DETP: a disc radius of ", radius, " m catches about ", landings,
                        " photon landings per disc (", mSettings.photonCount, " photons over ", area,
                        " m^2; the default radius aims at ", kDefaultDiscLandings,
-                       "): most vertices will read 0 and the rest spikes; widen the radius or "
-                       "shoot more photons");
+                       "): the vertices read a Poisson count of that mean, many of them 0; "
+                       "widen the radius or shoot more photons");
     }
     auto staticDiscs = std::make_unique<DiscIndex>(rayScene->device(), DiscIndex::Motion::Static);
     const std::uint32_t staticCount = receivers.staticVertexCount();

@@ -50,17 +50,17 @@ struct PhotonSegments;
  *  Sums are kept per vertex in double precision and applied in a fixed order (DiscIndex), so
  *  the same frames give bit-identical irradiance on any thread count.
  *
- *  Drift policy: a vertex's sum carries its own rounding error (CompensatedSum), so after n
- *  additions of at most p W a channel it is within 2^-53 |E| + n^3 2^-106 p of the exact sum,
- *  in full estimates and incremental updates alike. Once any vertex has taken
+ *  Drift policy: a vertex's power sum S carries its own rounding error (CompensatedSum), so
+ *  after n additions of at most p W a channel it is within 2^-53 |S| + n^3 2^-106 p of the
+ *  exact sum, in full estimates and incremental updates alike. Once any vertex has taken
  *  maxIncrementalUpdates additions since its last full estimate (default 2^30: within
- *  2^-53 |E| plus a sixty-five-thousandth of one segment's power) the next frame re-estimates
- *  everything: one frame that costs a full estimate. The cornell box's busiest vertex takes
- *  about 450 additions a frame while its block moves every frame (1M photons), so that is
- *  once in 2.4 million frames, eleven hours at 60 fps. (With plain double sums the bound was
- *  (n - 1) 2^-53 times the sum of every term added, and a re-estimate every 2^24 additions,
- *  ten minutes of that play, was needed to keep it under the published float's rounding.)
- *
+ *  2^-53 |S| plus a sixty-five-thousandth of the largest segment power it added) the next frame
+ *  re-estimates everything: one frame that costs a full estimate. The cornell box's busiest
+ *  vertex takes about 450 additions a frame while its block moves every frame (1M photons), so
+ *  that is once in 2.4 million frames, eleven hours at 60 fps. (With plain double sums the bound
+ *  was (n - 1) 2^-53 times the sum of every term added, and a re-estimate came every 2^24
+ *  additions, ten minutes of that play.)
+
  *  The comparison estimators (settings.estimator):
  *   - impact count (ImpactCounter): additive per triangle, so it is updated from the delta
  *     alone, static and mobile triangles alike (the seed's Add/Subtract);

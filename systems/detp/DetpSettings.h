@@ -51,8 +51,8 @@ inline constexpr float kPhotonMapRadiusPerDisc = 4.f;
 /// Expected photon landings per disc the default radius aims for when photons are scarce:
 /// with about two counted segments per landing that is a relative noise near 1/sqrt(128), 9%.
 inline constexpr float kDefaultDiscLandings = 64.f;
-/// A radius chosen by hand that catches fewer landings than this (relative noise over 50 %)
-/// is warned about.
+/// A radius chosen by hand that catches fewer landings than this (with about two counted
+/// segments per landing, a relative noise over a third) is warned about.
 inline constexpr double kFewDiscLandings = 4.0;
 
 /// The default DETP disc radius, the larger of two rules:

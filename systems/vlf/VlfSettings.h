@@ -24,8 +24,9 @@ struct VlfSettings {
     bool progress = false;  ///< log progress lines (info level) during the bake
     /// Most memory a bake may take (its peak, VlfMemory::bakeBytes), checked before its large
     /// arrays are allocated: a bake that needs more fails with the figure. 0: half of the
-    /// machine's memory (the rest is the scene's, the GL driver's, the system's). Settings
-    /// within their ranges can ask for tens of GB (direction level 6 at 256 lines).
+    /// machine's physical memory (the rest is the scene's, the GL driver's, the system's; a
+    /// container's memory limit is not read: set this below it). Settings within their ranges
+    /// can ask for tens of GB (direction level 6 at 256 lines).
     std::uint64_t maxBakeBytes = 0;
 };
 

@@ -294,6 +294,15 @@ TEST(GltfBadInput, ALinkOutOfTheScenesFolderIsRefused) {
     Registry registry;
     EXPECT_NO_THROW(importGltf(registry, withUri("own.bin"), kNoRefinement));
     EXPECT_GT(registry.aliveCount(), 0u);
+
+    // A mirror of the level made of links (cp -rs): its files lie beside the scene's real file.
+    const fs::path mirror = scratchFile("mirror");
+    fs::remove_all(mirror);
+    fs::create_directories(mirror);
+    fs::create_symlink(folder / "sub" / "own.bin", mirror / "own.bin");
+    fs::create_symlink(withUri("own.bin"), mirror / "level.gltf");
+    Registry mirrored;
+    EXPECT_NO_THROW(importGltf(mirrored, mirror / "level.gltf", kNoRefinement));
 }
 
 TEST(GltfBadInput, FailureWhileProcessingMeshesLeavesTheRegistryEmpty) {

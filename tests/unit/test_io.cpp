@@ -160,7 +160,7 @@ TEST_F(IoTest, PlyWithoutFacesHasTheDocumentedHeader) {
     expectSame(readPly(mDir / "points.ply"), mesh);
 }
 
-TEST_F(IoTest, PlyNoteIsAHeaderCommentThatReadsBack) {
+TEST_F(IoTest, PlyNoteIsAHeaderCommentThatReadsBackAndExportsAreKnownAgain) {
     const PlyMesh mesh = randomPly(mRandom, 5, 2);
     writePly(mDir / "noted.ply", mesh, PlyFormat::BinaryLittleEndian, "hybrid mode: indirect");
     std::ifstream file(mDir / "noted.ply", std::ios::binary);
@@ -168,12 +168,15 @@ TEST_F(IoTest, PlyNoteIsAHeaderCommentThatReadsBack) {
     EXPECT_NE(text.find("W/m^2\ncomment hybrid mode: indirect\nelement vertex 5\n"),
               std::string::npos);
     expectSame(readPly(mDir / "noted.ply"), mesh);
-    EXPECT_TRUE(looksLikePly(mDir / "noted.ply"));
+    EXPECT_TRUE(isIrradiancePly(mDir / "noted.ply"));
     expectErrorNaming([&] { writePly(mDir / "bad.ply", mesh, PlyFormat::Ascii, "two\nlines"); },
                       mDir / "bad.ply");
     std::ofstream(mDir / "notes.txt") << "my notes";
-    EXPECT_FALSE(looksLikePly(mDir / "notes.txt"));
-    EXPECT_FALSE(looksLikePly(mDir / "missing.ply"));
+    EXPECT_FALSE(isIrradiancePly(mDir / "notes.txt"));
+    std::ofstream(mDir / "bunny.ply") << "ply\nformat ascii 1.0\nelement vertex 0\nend_header\n";
+    EXPECT_FALSE(isIrradiancePly(mDir / "bunny.ply")) << "somebody's PLY";
+    EXPECT_FALSE(isIrradiancePly(mDir / "missing.ply"));
+    EXPECT_FALSE(isIrradiancePly(mDir)) << "a folder";
 }
 
 TEST_F(IoTest, WritesToAMissingFolderThrowNamingThePath) {

@@ -113,7 +113,9 @@ TEST(PhotonEmission, PointLightPhotonsAreQuasiRandomNotIndependent) {
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     for (std::uint32_t i = 0; i < n; ++i) {
         emitted.push_back(emitPhoton(light, i, kSeed).direction);
-        independent.push_back(photon::sampleSphere(unit(rng), unit(rng)));
+        const float u1 = unit(rng);
+        const float u2 = unit(rng); // (the order of a call's arguments is unspecified)
+        independent.push_back(photon::sampleSphere(u1, u2));
     }
     struct Box {
         double z0, z1, phi0, phi1;

@@ -688,13 +688,19 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
             registry.patch<WorldTransform>(room.cube).matrix = translation(cube);
         }
         if (pick > 0.5f) { // the crate anywhere on the floor in front of the pillar, turned
-            const glm::vec3 at(-1.5f + 3.f * unit(rng), kCrateRest.y, -1.5f + 1.9f * unit(rng));
-            registry.patch<WorldTransform>(room.crate).matrix = glm::rotate(
-                translation(at), glm::two_pi<float>() * unit(rng), glm::vec3(0.f, 1.f, 0.f));
+            // (One draw per statement: the order of a call's arguments is unspecified.)
+            const float x = -1.5f + 3.f * unit(rng);
+            const float z = -1.5f + 1.9f * unit(rng);
+            const float turn = glm::two_pi<float>() * unit(rng);
+            registry.patch<WorldTransform>(room.crate).matrix =
+                glm::rotate(translation({x, kCrateRest.y, z}), turn, glm::vec3(0.f, 1.f, 0.f));
         }
-        if (frame % 25 == 0)
-            registry.patch<WorldTransform>(room.light).matrix =
-                translation({-1.f + 2.f * unit(rng), 0.5f + 0.7f * unit(rng), -1.f + unit(rng)});
+        if (frame % 25 == 0) {
+            const float x = -1.f + 2.f * unit(rng);
+            const float y = 0.5f + 0.7f * unit(rng);
+            const float z = -1.f + unit(rng);
+            registry.patch<WorldTransform>(room.light).matrix = translation({x, y, z});
+        }
         registry.ctx().get<RayScene>().syncMoved(registry);
 
         const glm::dvec3 before = impactPower(storeOf(registry));
