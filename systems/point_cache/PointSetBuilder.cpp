@@ -17,6 +17,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -171,6 +172,7 @@ PointSetStats buildPointSet(const Registry& registry, const RayScene& scene,
     std::vector<std::uint8_t> hasAo(kBatch);
     std::uint32_t rejections = 0;
     std::uint64_t nextReport = 1'000'000;
+    const auto start = std::chrono::steady_clock::now();
     bool done = sources.empty();
     for (std::uint64_t base = 0; !done; base += kBatch) {
         const std::size_t count = std::size_t(std::min<std::uint64_t>(kBatch, s.maxDarts - base));
@@ -243,8 +245,12 @@ PointSetStats buildPointSet(const Registry& registry, const RayScene& scene,
             done = true;
         }
         if (stats.darts >= nextReport) {
-            logInfo("point cache: ", stats.darts, " darts, ", cache.position.size(), " points, ",
-                    stats.aoCalls, " AO calls");
+            // It stops at whichever budget comes first, or after a run of rejections.
+            const double seconds =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            logInfo("point cache: ", stats.darts, " of at most ", s.maxDarts, " darts, ",
+                    cache.position.size(), " of at most ", s.maxPoints, " points, ", stats.aoCalls,
+                    " AO calls, ", std::lround(seconds), " s");
             nextReport += 1'000'000;
         }
     }
