@@ -14,6 +14,8 @@ namespace qgi::demo {
 
 PathFollower loadCameraPath(const std::filesystem::path& path) {
     std::error_code error;
+    if (path.empty()) fail("--camera-path: the path is empty");
+    if (!std::filesystem::exists(path, error)) fail(path.string(), ": no such camera path file");
     if (!std::filesystem::is_regular_file(path, error))
         fail(path.string(), ": the camera path is not a file");
     std::ifstream in(path);

@@ -164,12 +164,24 @@ private:
     std::pair<int, struct sigaction> mPrevious[2] = {{SIGINT, {}}, {SIGTERM, {}}};
 };
 
+/// The files the demo reads (the scene, unless built in; a camera path file), which no output
+/// may overwrite.
+std::vector<std::filesystem::path> inputFiles(const DemoOptions& options) {
+    std::vector<std::filesystem::path> inputs;
+    if (!isBuiltinScene(options.scene)) inputs.emplace_back(options.scene);
+    if (options.cameraPath != "scene" && options.cameraPath != "none")
+        inputs.emplace_back(options.cameraPath);
+    return inputs;
+}
+
 /// Checks an output option before the run: a file path (or, `extended`, a base path that
-/// names the files BASE + each of `extensions`) that can be written, and that is not the scene
-/// being loaded.
+/// names the files BASE + each of `extensions`) that can be written, that is no input of the
+/// run, no file another output writes (`written`, which gets this option's files) and no FIFO
+/// or device (opening one would block or write who knows where).
 void prepareOutput(const std::optional<std::string>& base, const char* option,
-                   const std::string& scene, bool extended = false,
-                   std::initializer_list<const char*> extensions = {}) {
+                   const std::vector<std::filesystem::path>& inputs,
+                   std::vector<std::pair<std::filesystem::path, const char*>>& written,
+                   bool extended = false, std::initializer_list<const char*> extensions = {}) {
     if (!base) return;
     namespace fs = std::filesystem;
     if (base->empty()) fail(option, ": the path is empty");
@@ -179,10 +191,16 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
     for (const char* extension : extensions)
         files.emplace_back(*base + extension);
     for (const fs::path& file : files) {
-        if (!isBuiltinScene(scene) && fs::exists(file, error) && fs::equivalent(file, scene, error))
-            fail(option, ": '", file.string(),
-                 "' is the scene being loaded (--scene); not "
-                 "overwritten");
+        const fs::path name = fs::weakly_canonical(file, error);
+        for (const auto& [other, by] : written)
+            if (name == other) fail(option, ": '", file.string(), "' is written by ", by, " too");
+        written.emplace_back(name, option);
+        if (!fs::exists(file, error)) continue;
+        for (const fs::path& input : inputs)
+            if (fs::equivalent(file, input, error))
+                fail(option, ": '", file.string(), "' is an input of this run; not overwritten");
+        if (!fs::is_regular_file(file, error) && !fs::is_directory(file, error))
+            fail(option, ": '", file.string(), "' is not a regular file; not written");
     }
     // A base path (`extended`) names files BASE.ext: a folder of that name is no obstacle.
     if (base->back() == '/' || (!extended && fs::is_directory(*base, error)))
@@ -226,13 +244,18 @@ bool wantVlf(const Registry& registry) {
 
 int runDemo(const DemoOptions& options) {
     if (options.quiet) setLogLevel(LogLevel::Warning);
-    prepareOutput(options.screenshot, "--screenshot", options.scene, true, {".png", ".exr"});
-    prepareOutput(options.profile, "--profile", options.scene, true, {".json", ".csv"});
-    prepareOutput(options.exportScene, "--export-scene", options.scene);
-    prepareOutput(options.exportIrradiance, "--export-irradiance", options.scene);
-    prepareOutput(options.exportAvatars, "--export-avatars", options.scene);
-    // An earlier export is rewritten; any other file is somebody's.
+    const std::vector<std::filesystem::path> inputs = inputFiles(options);
+    std::vector<std::pair<std::filesystem::path, const char*>> written;
+    prepareOutput(options.screenshot, "--screenshot", inputs, written, true, {".png", ".exr"});
+    prepareOutput(options.profile, "--profile", inputs, written, true, {".json", ".csv"});
+    prepareOutput(options.exportScene, "--export-scene", inputs, written);
+    prepareOutput(options.exportIrradiance, "--export-irradiance", inputs, written);
+    prepareOutput(options.exportAvatars, "--export-avatars", inputs, written);
+    // An earlier export (or an empty file made for it) is rewritten; any other file is
+    // somebody's.
+    std::error_code sizeError;
     if (options.exportIrradiance && std::filesystem::exists(*options.exportIrradiance) &&
+        std::filesystem::file_size(*options.exportIrradiance, sizeError) != 0 &&
         !isIrradiancePly(*options.exportIrradiance))
         fail("--export-irradiance: '", *options.exportIrradiance,
              "' exists and is not an irradiance export of qgi's; not overwritten");
@@ -409,7 +432,10 @@ int runDemo(const DemoOptions& options) {
     if (options.exportAvatars)
         write("--export-avatars", [&] {
             exportAvatarSh(world, *options.exportAvatars);
-            logInfo("wrote ", *options.exportAvatars);
+            logInfo("wrote ", *options.exportAvatars,
+                    options.mode == "hybrid"
+                        ? " (hybrid mode: without the direct light the renderer draws)"
+                        : "");
         });
     if (options.profile)
         write("--profile", [&] {

@@ -13,6 +13,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -365,9 +367,27 @@ TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
         const RunResult run = runDemo("--headless --frames 1 --photons 1000 --scene " +
                                       scene.string() + " " + option + scene.string());
         EXPECT_EQ(run.exitCode, 1) << option << run.output;
-        EXPECT_NE(run.output.find("is the scene being loaded"), std::string::npos) << run.output;
+        EXPECT_NE(run.output.find("is an input of this run"), std::string::npos) << run.output;
     }
     EXPECT_EQ(fs::file_size(scene), size);
+    // Nor the camera path, nor another output's file, nor a FIFO (which would block).
+    const fs::path path = dir / "path.csv";
+    std::ofstream(path) << "0,0,0.3,1,0,0\n";
+    const fs::path fifo = dir / "pipe.png";
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    for (const auto& [options, says] :
+         {std::pair{"--camera-path " + path.string() + " --export-avatars " + path.string(),
+                    std::string("is an input of this run")},
+          std::pair{"--profile " + (dir / "run").string() + " --export-avatars " +
+                        (dir / "run.csv").string(),
+                    std::string("is written by --profile too")},
+          std::pair{"--screenshot " + (dir / "pipe").string(),
+                    std::string("is not a regular file")}}) {
+        const RunResult run =
+            runDemo("--scene cornell --headless --frames 1 --photons 1000 " + options);
+        EXPECT_EQ(run.exitCode, 1) << options << run.output;
+        EXPECT_NE(run.output.find(says), std::string::npos) << run.output;
+    }
 
     // --export-irradiance rewrites an earlier export, never another kind of file.
     const fs::path notes = dir / "notes.ply";
@@ -378,6 +398,15 @@ TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
     EXPECT_EQ(run.exitCode, 1) << run.output;
     EXPECT_NE(run.output.find("is not an irradiance export"), std::string::npos) << run.output;
     EXPECT_EQ(fs::file_size(notes), 8u);
+    // An empty file made for it (mktemp) is taken.
+    const fs::path empty = dir / "empty.ply";
+    std::ofstream(empty).flush();
+    EXPECT_EQ(runDemo("--scene cornell --headless --frames 1 --photons 1000 --vlf off "
+                      "--export-irradiance " +
+                      empty.string())
+                  .exitCode,
+              0);
+    EXPECT_TRUE(isIrradiancePly(empty));
 }
 
 TEST(DemoSmoke, AScreenshotNamedAfterItsImageWritesThatImage) {
