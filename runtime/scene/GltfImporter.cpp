@@ -489,6 +489,48 @@ int GltfReader::nodeLight(int index) const {
     return light;
 }
 
+namespace {
+
+/// Edit distance between a and b, case ignored (insertions, deletions, substitutions).
+std::size_t editDistance(std::string_view a, std::string_view b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j)
+        row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t above = row[j];
+            const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                              std::tolower(static_cast<unsigned char>(b[j - 1]));
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (same ? 0 : 1)});
+            diagonal = above;
+        }
+    }
+    return row[b.size()];
+}
+
+} // namespace
+
+void GltfReader::warnMisspeltExtras(int index) const {
+    // Extras are free for any tool (Blender writes custom properties there): only a key within
+    // two edits of one qgi reads, and not it, is worth a word.
+    static constexpr std::string_view kKeys[] = {"mobility", "avatar",  "pointCache",
+                                                 "active",   "standIn", "qgiPath"};
+    const tinygltf::Value& extras = mModel.nodes[std::size_t(index)].extras;
+    if (!extras.IsObject()) return;
+    for (const std::string& key : extras.Keys()) {
+        if (std::find(std::begin(kKeys), std::end(kKeys), key) != std::end(kKeys)) continue;
+        for (const std::string_view known : kKeys)
+            if (editDistance(key, known) <= 2) {
+                logWarning(mLabel, ": nodes[", index, "].extras.", key,
+                           ": not a key qgi reads; did you mean '", known,
+                           "'? (the node is read without it)");
+                break;
+            }
+    }
+}
+
 std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
     std::vector<EntityRecord> records;
     mNodeRecord.assign(mModel.nodes.size(), -1);
@@ -505,6 +547,7 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
         const std::string field = str("nodes[", index, "]");
         const int self = int(records.size());
         mNodeRecord[std::size_t(index)] = self;
+        warnMisspeltExtras(index);
         bool hidden = false; // a mesh node scaled to nothing
         {
             EntityRecord record;

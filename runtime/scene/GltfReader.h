@@ -210,6 +210,8 @@ private:
     /// cycles and depth.
     std::vector<int> checkNodeGraph() const;
     std::vector<int> sceneRoots(const std::vector<int>& parents) const;
+    /// Warns of a node extras key that looks like a misspelt qgi key ("mobilty").
+    void warnMisspeltExtras(int index) const;
     /// The scene's extras {"exposure": x} (a finite x > 0), else 1.
     float sceneExposure() const;
     Transform localTransform(int index) const;

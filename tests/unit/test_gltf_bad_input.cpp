@@ -147,6 +147,23 @@ std::string triangleWithExtras(const std::string& extras) {
     return text.insert(at + anchor.size(), R"("extras": )" + extras + ",");
 }
 
+TEST(GltfBadInput, AMisspeltExtrasKeyIsNamedWithTheOneMeant) {
+    // "mobilty" loads the node as static, as the file says; a warning names the slip. Keys of
+    // other tools (Blender's custom properties) pass without a word.
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                  fs::copy_options::overwrite_existing);
+    for (const auto& [extras, warned] :
+         {std::pair{R"({"mobilty": "mobile"})", true}, std::pair{R"({"PointCache": true})", true},
+          std::pair{R"({"blender_prop": 3, "mobility": "mobile"})", false}}) {
+        std::ofstream(scratchFile("extras.gltf")) << triangleWithExtras(extras);
+        Registry registry;
+        ::testing::internal::CaptureStderr();
+        importGltf(registry, scratchFile("extras.gltf"), kNoRefinement);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_EQ(log.find("did you mean") != std::string::npos, warned) << extras << ": " << log;
+    }
+}
+
 TEST(GltfBadInput, DeepNestingIsRefusedBeforeParsing) {
     // 10000 nested arrays overflow tinygltf's recursive parser; the importer must not hand
     // them over. The scene sits in the good folder's copy so the external .bin resolves.
