@@ -421,21 +421,20 @@ int runDemo(const DemoOptions& options) {
             failures += str(failures.empty() ? "" : "; ", option, ": ", e.what());
         }
     };
+    // What the lighting exports hold, in the log.
+    const bool hybrid = options.mode == "hybrid";
+    const char* const holds =
+        hybrid ? " (hybrid mode: without the direct light the renderer draws)" : "";
     if (options.exportIrradiance)
         write("--export-irradiance", [&] {
-            const bool hybrid = options.mode == "hybrid";
             exportVertexIrradiance(world, *options.exportIrradiance, PlyFormat::BinaryLittleEndian,
                                    hybrid ? kHybridExportNote : kPhotonExportNote);
-            logInfo("wrote ", *options.exportIrradiance,
-                    hybrid ? " (hybrid mode: without the direct light the renderer draws)" : "");
+            logInfo("wrote ", *options.exportIrradiance, holds);
         });
     if (options.exportAvatars)
         write("--export-avatars", [&] {
             exportAvatarSh(world, *options.exportAvatars);
-            logInfo("wrote ", *options.exportAvatars,
-                    options.mode == "hybrid"
-                        ? " (hybrid mode: without the direct light the renderer draws)"
-                        : "");
+            logInfo("wrote ", *options.exportAvatars, holds);
         });
     if (options.profile)
         write("--profile", [&] {

@@ -51,27 +51,23 @@ void DetpIrradianceSystem::build(Registry& registry) {
 
     ReceiverSet receivers;
     receivers.build(registry);
+    double area = 0.0; // m^2 of every receiver's triangles
+    for (const float a : receivers.triangleAreas())
+        area += double(a);
+    const SceneInfo* info = registry.ctx().find<SceneInfo>();
     float radius = mSettings.discRadius;
     if (radius == 0.f) {
-        const SceneInfo* info = registry.ctx().find<SceneInfo>();
         if (!info)
             fail("DETP: DetpSettings.discRadius is 0 (scene default) but the registry has no "
                  "SceneInfo to scale it from");
-        double area = 0.0;
-        for (const float a : receivers.triangleAreas())
-            area += double(a);
         radius = defaultDiscRadius(*info, area, mSettings.photonCount);
     } else {
-        if (const SceneInfo* info = registry.ctx().find<SceneInfo>();
-            info && !info->bounds.empty() && radius > glm::length(info->bounds.extent()))
+        if (info && !info->bounds.empty() && radius > glm::length(info->bounds.extent()))
             fail("DETP: DetpSettings.discRadius = ", radius, " m is wider than the whole scene (",
                  glm::length(info->bounds.extent()),
                  " m across): every disc would average all of it");
         // Photons spread evenly over every surface would land this often in a disc; the default
         // radius aims at kDefaultDiscLandings.
-        double area = 0.0;
-        for (const float a : receivers.triangleAreas())
-            area += double(a);
         const double landings = double(mSettings.photonCount) * glm::pi<double>() * double(radius) *
                                 double(radius) / area;
         if (mSettings.estimator == IrradianceEstimator::Detp && mSettings.photonCount > 0 &&

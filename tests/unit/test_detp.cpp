@@ -96,6 +96,25 @@ double footExpectation(double power, double h, double r) {
     return power * oneMinusCos / (2.0 * kPi * r * r);
 }
 
+/// The binomial standard error of the DETP estimate at the foot: the count of the N photons
+/// that cross the disc is binomial(N, p), p = the disc's solid angle / 4 pi.
+double footSigma(double power, double h, double r, double photons) {
+    const double expected = footExpectation(power, h, r);
+    const double p = expected * kPi * r * r / power;
+    return expected * std::sqrt((1.0 - p) / (photons * p));
+}
+
+/// DETP's estimate (red channel) at vertex 4 of `floor`, with discs of radius r, over the
+/// registry's photons.
+double detpAtFoot(Registry& registry, Entity floor, double r) {
+    DetpSettings settings;
+    settings.discRadius = float(r);
+    DetpIrradianceSystem system(settings);
+    system.build(registry);
+    system.update(registry, {});
+    return irradiance(registry, floor).irradiance[4].x;
+}
+
 // ---- analytic cases -----------------------------------------------------------------------
 
 TEST(Detp, PointLightClosedFormTendsToTheInverseSquareLaw) {
@@ -141,21 +160,11 @@ TEST(Detp, PointLightOverABlackPlane) {
     }
 
     for (const double r : {0.1, 0.03}) {
-        DetpSettings settings;
-        settings.discRadius = float(r);
-        DetpIrradianceSystem system(settings);
-        system.build(registry);
-        system.update(registry, {});
-        const double estimate = irradiance(registry, floor).irradiance[4].x;
-
-        // The count of crossing photons is binomial(N, p), p = the disc's solid angle / 4 pi.
-        const double expected = footExpectation(kPower, kHeight, r);
-        const double p = expected * kPi * r * r / kPower;
-        const double sigma =
-            kPower / double(kPhotons) / (kPi * r * r) * std::sqrt(double(kPhotons) * p * (1.0 - p));
         // (footExpectation's limit, I / h^2, is checked by
         // PointLightClosedFormTendsToTheInverseSquareLaw.)
-        EXPECT_NEAR(estimate, expected, 4.0 * sigma) << "r = " << r;
+        EXPECT_NEAR(detpAtFoot(registry, floor, r), footExpectation(kPower, kHeight, r),
+                    4.0 * footSigma(kPower, kHeight, r, double(kPhotons)))
+            << "r = " << r;
     }
 }
 
@@ -187,16 +196,9 @@ TEST(Detp, PointLightOverABlackPlaneThroughTheRealEmitterAndTracerFollowsTheClos
 
     const double inverseSquare = power / (4.0 * kPi * h * h);
     for (const double r : {0.3, 0.1, 0.03}) {
-        DetpSettings settings;
-        settings.discRadius = float(r);
-        DetpIrradianceSystem system(settings);
-        system.build(registry);
-        system.update(registry, {});
-        const double estimate = irradiance(registry, floor).irradiance[4].x;
-        const double expected = footExpectation(power, h, r);
-        const double p = expected * kPi * r * r / power;
-        const double sigma = expected * std::sqrt((1.0 - p) / (double(kPhotons) * p));
-        EXPECT_NEAR(estimate, expected, 4.0 * sigma) << "r = " << r;
+        const double estimate = detpAtFoot(registry, floor, r);
+        const double sigma = footSigma(power, h, r, double(kPhotons));
+        EXPECT_NEAR(estimate, footExpectation(power, h, r), 4.0 * sigma) << "r = " << r;
         if (r == 0.3) {
             EXPECT_GT(std::abs(estimate - inverseSquare), 4.0 * sigma);
         }
