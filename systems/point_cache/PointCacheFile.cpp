@@ -11,6 +11,7 @@
 #include "runtime/core/Finite.h"
 #include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonEmitter.h"
 #include "systems/photon_update/PhotonSettings.h"
 #include "systems/point_cache/PointCache.h"
@@ -74,6 +75,7 @@ private:
 std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& s) {
     Fnv1aHasher h;
     h.add(kPointCacheFileVersion);
+    h.add(kPointCacheBakeRevision);
     for (const auto v :
          {s.seed, std::uint64_t(s.particleCount), std::uint64_t(s.particleBounces),
           std::uint64_t(s.stopAfterRejections), s.maxDarts, std::uint64_t(s.maxPoints),
@@ -90,7 +92,11 @@ std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& 
     registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const StaticMesh&, const Mesh& m, const WorldTransform& w) {
             mesh(e, m, w, false);
-            if (const Material* mat = registry.tryGet<Material>(e)) h.add(mat->emission);
+            if (const Material* mat = registry.tryGet<Material>(e)) {
+                h.add(mat->emission);
+                if (mat->emission != glm::vec3(0.f))
+                    h.add(std::uint8_t(hasLightStandIn(registry, e)));
+            }
         });
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const MobileMesh& mobile, const Mesh& m, const WorldTransform& w) {

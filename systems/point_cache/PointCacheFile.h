@@ -12,13 +12,17 @@ struct PointCacheSettings;
 
 /// Version of the cache file layout; a file of another version is stale.
 inline constexpr std::uint32_t kPointCacheFileVersion = 1;
+/// Revision of the bake and of the shading it stores, part of the key: raised whenever the
+/// code changes what a file of the same layout would hold, so files of older code are stale.
+/// 2: lamps with a LightStandIn are no area lights of the cache.
+inline constexpr std::uint32_t kPointCacheBakeRevision = 2;
 
-/** Key of a cache file: FNV-1a 64 over the file version, every setting that shapes the point
- *  set or its stored shading (resolved values), the scene's static and mobile meshes (world
- *  matrix, positions, indices, emission; for mobiles, whether they are out of the world) and
- *  every light (kind, pose, colour x intensity,
- *  cone). Any change to those gives a different key, so a file made for another scene or
- *  other settings is never used.                                                           */
+/** Key of a cache file: FNV-1a 64 over the file version and bake revision, every setting that
+ * shapes the point set or its stored shading (resolved values), the scene's static and mobile
+ * meshes (world matrix, positions, indices, emission; for emissive static meshes, whether a
+ * LightStandIn stands in for them; for mobiles, whether they are out of the world) and every light
+ * (kind, pose, colour x intensity, cone). Any change to those gives a different key, so a file made
+ * for another scene or other settings is never used. */
 std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& resolved);
 
 /** File layout (the writing machine's byte order; an endianness marker rejects others):

@@ -32,6 +32,9 @@ std::vector<AreaLight> findAreaLights(const Registry& registry, const Aabb& scen
         if (!registry.has<StaticMesh>(e.entity)) continue;
         prepareEmitter(registry, sceneBox, e);
         if (!(e.power.x + e.power.y + e.power.z > 0.f)) continue;
+        // A lamp with a LightStandIn: the shader draws its direct light through the stand-in
+        // on every surface, the cache's included, so the cache must not hold it too.
+        if (e.directDrawn) continue;
         AreaLight light;
         light.entity = e.entity;
         light.radiance = e.radiant;

@@ -26,7 +26,8 @@ struct AreaLight {
 };
 
 /// Every emissive StaticMesh, in registry order (the photon emitters' order). Emissive mobiles
-/// are not area lights of the cache (its light samples are fixed in world space).
+/// are not area lights of the cache (its light samples are fixed in world space), nor are
+/// lamps whose direct light the shader draws through a LightStandIn (hasLightStandIn).
 std::vector<AreaLight> findAreaLights(const Registry& registry, const Aabb& sceneBox);
 
 /// Irradiance at x (unit normal n) from one area light, with shadows, and the visible fraction.

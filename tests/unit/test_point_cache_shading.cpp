@@ -1,5 +1,6 @@
 // Point cache (seed 003): stored soft shadows against an independent reference, the cache
 // file, the per-frame update.
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
@@ -230,6 +231,21 @@ TEST(PointCacheShading, UnoccludedLightMatchesLambertsClosedForm) {
         EXPECT_FLOAT_EQ(s.minVisibility, 1.f);
         EXPECT_FLOAT_EQ(s.maxVisibility, 1.f);
     }
+}
+
+TEST(PointCacheShading, ALampDrawnThroughItsStandInIsNoAreaLightOfTheCache) {
+    // Hybrid mode's shader draws a stand-in's light on every surface, the cache's included:
+    // were the panel an area light of the cache too, cached surfaces would get it twice.
+    ShadowScene scene(false);
+    ASSERT_EQ(findAreaLights(scene.registry, Aabb{}).size(), 1u);
+    const Entity bulb = test::addPointLight(scene.registry, {0.f, kLightY - 0.05f, 0.f}, 5.f);
+    EXPECT_EQ(findAreaLights(scene.registry, Aabb{}).size(), 1u) << "a bulb without the tag";
+    const PointCacheSettings settings;
+    const std::uint64_t untagged = pointCacheKey(scene.registry, settings);
+    scene.registry.emplace<LightStandIn>(bulb);
+    EXPECT_TRUE(findAreaLights(scene.registry, Aabb{}).empty());
+    // A cache file made before the tag holds the panel's light: it is stale now.
+    EXPECT_NE(pointCacheKey(scene.registry, settings), untagged);
 }
 
 TEST(PointCacheShading, SoftShadowBehindABlockerMatchesTheReference) {
