@@ -149,6 +149,9 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
                 // An entity's faces are consecutive among the specular faces.
                 item.vlfFirstFace = field.vlf.specularIndex(it->second.front());
                 item.vlfFaceCount = std::int32_t(it->second.size());
+                // The VLF's k_d, which a metal's k_s leaves over (VlfScene::fromComponent):
+                // baseColor alone would reflect more than the surface receives.
+                item.albedo = field.vlf.faces()[it->second.front()].diffuse;
             }
         }
         if (registry.has<Avatar>(e)) {

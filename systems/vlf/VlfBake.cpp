@@ -198,8 +198,18 @@ private:
         if (lights.empty()) return;
         const std::vector<Face>& faces = mVlf.faces();
         const float lift = 1e-4f * mVlf.radius();
+        // A directional light's shadow ray runs past every triangle of the scene.
+        const float outside = 2.f * glm::length(mScene.bounds().extent()) + 1.f;
         const auto irradianceFrom = [&](const PunctualLight& light, const Face& f,
                                         const glm::vec3& x, glm::vec3& from) -> glm::vec3 {
+            if (light.kind == PunctualLight::Kind::Directional) {
+                from = -light.axis;
+                const float c = glm::dot(f.normal, from);
+                if (c <= 0.f) return glm::vec3(0.f);
+                const glm::vec3 start = x + lift * f.normal;
+                if (mScene.occluded(start, start + outside * from)) return glm::vec3(0.f);
+                return light.intensity * c;
+            }
             const glm::vec3 toLight = light.position - x;
             const float r2 = glm::dot(toLight, toLight);
             if (!(r2 > 0.f)) return glm::vec3(0.f);
@@ -224,8 +234,9 @@ private:
                     mVlf.irradiance()[t] = E;
                 }
         });
-        // Glossy cells: the lobe around the light's mirror direction (a mirror's reflection
-        // of a point light is a delta the tiles cannot hold; the renderer draws it).
+        // Glossy cells: the lobe around the light's mirror direction. A mirror's reflection
+        // of a punctual light is a delta the tiles cannot hold: it is left out, as the light
+        // itself, which has no area, is invisible to the camera.
         const int m = mVlf.tileSize();
         tbb::parallel_for(std::size_t(0), mDirs.size(), [&](std::size_t j) {
             for (std::size_t sf = 0; sf < mVlf.specularFaceCount(); ++sf) {

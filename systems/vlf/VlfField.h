@@ -10,7 +10,7 @@
 namespace qgi {
 
 /// World resource: the baked Virtual Light Field of the static scene, for the renderer's
-/// glossy and mirror lookup and for CPU queries (SH probes, tests). Created by VlfSystem at
+/// glossy and mirror lookup and for CPU queries (tools, tests). Created by VlfSystem at
 /// load; never changes during the frame.
 struct VlfField {
     vlf::Vlf vlf;

@@ -1,5 +1,6 @@
 #include "systems/vlf/VlfScene.h"
 
+#include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
@@ -62,11 +63,7 @@ VlfScene::Material VlfScene::fromComponent(const qgi::Material& m) {
 
 glm::vec3 PunctualLight::intensityTowards(const glm::vec3& d) const {
     if (cosOuter < -1.f) return intensity;
-    const float c = glm::dot(d, axis);
-    if (c <= cosOuter) return glm::vec3(0.f);
-    if (c >= cosInner) return intensity;
-    const float x = (c - cosOuter) / std::max(cosInner - cosOuter, 1e-6f);
-    return intensity * (x * x * (3.f - 2.f * x)); // smooth falloff between the cones
+    return intensity * spotFalloff(glm::dot(d, axis), cosInner, cosOuter);
 }
 
 std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
@@ -120,6 +117,15 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
             l.axis = glm::normalize(-glm::vec3(w.matrix[2]));
             l.cosInner = std::cos(s.innerConeAngle);
             l.cosOuter = std::cos(s.outerConeAngle);
+            lights.push_back(l);
+        });
+    registry.view<const DirectionalLight, const WorldTransform>().each(
+        [&](Entity e, const DirectionalLight& d, const WorldTransform& w) {
+            if (registry.has<LightStandIn>(e)) return;
+            PunctualLight l;
+            l.kind = PunctualLight::Kind::Directional;
+            l.intensity = d.color * d.irradiance;
+            l.axis = glm::normalize(-glm::vec3(w.matrix[2]));
             lights.push_back(l);
         });
     const SceneInfo* info = registry.ctx().find<SceneInfo>();

@@ -40,14 +40,19 @@ struct Face {
     bool isMirror() const { return isSpecular() && phongExponent <= 0.f; }
 };
 
-/// A point or spot light, in world space, for the bake's direct-light pass.
+/// A point, spot or directional light, in world space, for the bake's direct-light pass.
 struct PunctualLight {
+    enum class Kind : std::uint32_t { Local, Directional };
+    Kind kind = Kind::Local; ///< Local: a point or spot light at `position`
     glm::vec3 position{0.f};
-    glm::vec3 intensity{0.f};       ///< radiant intensity on the axis x colour, W/sr
-    glm::vec3 axis{0.f, 0.f, -1.f}; ///< spot: unit direction it shines along
+    /// Local: radiant intensity on the axis x colour, W/sr. Directional: irradiance on a
+    /// surface facing the light x colour, W/m^2.
+    glm::vec3 intensity{0.f};
+    glm::vec3 axis{0.f, 0.f, -1.f}; ///< spot, directional: unit direction the light travels
     float cosInner = -2.f;          ///< spot: full intensity where cos(angle) >= cosInner
     float cosOuter = -2.f;          ///< spot: zero where cos(angle) <= cosOuter; -2: point
-    /// Radiant intensity towards unit direction `d` (from the light), W/sr.
+    /// Local: radiant intensity towards unit direction `d` (from the light), W/sr
+    /// (spotFalloff for a spot).
     glm::vec3 intensityTowards(const glm::vec3& d) const;
 };
 
@@ -68,8 +73,9 @@ public:
         std::uint32_t face = 0;
     };
 
-    /// Faces from StaticMesh + Mesh + WorldTransform + Material; PointLight / SpotLight with a
-    /// WorldTransform (LightStandIn lights are skipped: their surface emits already); the
+    /// Faces from StaticMesh + Mesh + WorldTransform + Material; PointLight / SpotLight /
+    /// DirectionalLight with a WorldTransform (LightStandIn lights are skipped: their surface
+    /// emits already); the
     /// environment from SceneInfo when present. Mobiles and avatars are not part of the VLF.
     /// Throws qgi::Error on an empty scene or non-finite data, naming the entity.
     static std::unique_ptr<VlfScene> fromRegistry(const Registry& registry);

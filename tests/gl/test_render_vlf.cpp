@@ -8,6 +8,7 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/StaticMesh.h"
+#include "components/VertexIrradiance.h"
 #include "components/WorldTransform.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/render/GlWindow.h"
@@ -17,6 +18,7 @@
 #include "tests/unit/test_meshes.h"
 
 #include <epoxy/gl.h>
+#include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
@@ -177,6 +179,71 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
         EXPECT_EQ(failed, 0) << failed << " of " << floorPixels
                              << " floor pixels outside their allowance; worst error " << worst
                              << " times its allowance";
+    }
+}
+
+TEST(RenderVlf, AGlossyMetalIsDrawnWithItsDiffusePartOnly) {
+    // glTF metallic-roughness: a metal the VLF reads as specular (k_s = metallic) keeps only
+    // k_d = baseColor (1 - metallic) as its diffuse albedo, or it would reflect more than it
+    // receives; a rough one stays diffuse with albedo baseColor. The floor's two halves, lit
+    // by the same vertex irradiance E, photon mode, seen from straight above. Their mirror
+    // images show only the black sky (the lamp that lets the VLF bake lies far to the side),
+    // so each pixel is albedo / pi * E.
+    QGI_SKIP_WITHOUT_GL();
+    GlWindow window(test::testWindow(kSize, kSize, "qgi test_render_vlf"));
+    {
+        Registry world;
+        Material polished, rough;
+        polished.baseColor = rough.baseColor = glm::vec3(0.8f, 0.6f, 0.4f);
+        polished.metallic = rough.metallic = 0.5f;
+        polished.roughness = 0.f;
+        rough.roughness = 1.f;
+        const glm::vec3 E(3.f, 2.f, 1.f);
+        const auto lit = [&](Entity e) {
+            VertexIrradiance& vi = world.emplace<VertexIrradiance>(e);
+            vi.irradiance.assign(world.get<Mesh>(e).positions.size(), E);
+            vi.dirty.push_back({0, std::uint32_t(vi.irradiance.size())});
+        };
+        lit(addQuad(world, quadMesh({-1, 0, 1}, {1, 0, 0}, {0, 0, -2}), polished)); // x < 0
+        lit(addQuad(world, quadMesh({0, 0, 1}, {1, 0, 0}, {0, 0, -2}), rough));     // x > 0
+        addQuad(world, quadMesh({3, 1, -1}, {0, 0, 2}, {1, 0, 0}), emitter(1.f));
+        const Entity cam = world.create();
+        world.emplace<Camera>(cam, Camera{1.2f, 0.05f, 20.f, true});
+        world.emplace<WorldTransform>(
+            cam, WorldTransform{glm::inverse(glm::lookAt(glm::vec3(0.f, 1.5f, 0.f), glm::vec3(0.f),
+                                                         glm::vec3(0, 0, -1)))}); // +x: right
+
+        VlfSystemSettings vs;
+        vs.bake.directionLevel = 2;
+        vs.bake.linesPerSide = 16;
+        vs.bake.tileSize = 4;
+        vs.bake.iterations = 1;
+        VlfSystem(vs).build(world);
+        ASSERT_EQ(world.ctx().get<VlfField>().vlf.specularFaceCount(), 1u); // the polished half
+
+        RenderSettings rs;
+        rs.width = kSize;
+        rs.height = kSize;
+        rs.mode = ShadingMode::Photon;
+        RenderSystem renderer(rs);
+        renderer.update(world, FrameContext{});
+        const ImageF hdr = renderer.readHdr();
+        // Pixels well inside either half (the floor spans about +-0.97 of the view).
+        int checked = 0;
+        for (int y = kSize / 8; y < kSize - kSize / 8; ++y)
+            for (int x = kSize / 8; x < kSize - kSize / 8; ++x) {
+                if (std::abs(x + 0.5 - kSize / 2.0) < kSize / 8.0) continue; // the seam
+                const glm::vec3 albedo =
+                    x < kSize / 2 ? polished.baseColor * 0.5f : rough.baseColor;
+                const float* got = hdr.pixel(x, y);
+                for (int c = 0; c < 3; ++c) {
+                    const double want = double(albedo[c]) / glm::pi<double>() * E[c];
+                    // Float rounding of albedo / pi * E and of the interpolated irradiance.
+                    EXPECT_NEAR(got[c], want, 1e-5 * want) << "pixel " << x << "," << y;
+                }
+                ++checked;
+            }
+        EXPECT_GT(checked, kSize * kSize / 3);
     }
 }
 

@@ -7,6 +7,7 @@
 #include <glm/gtc/constants.hpp>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -562,6 +563,71 @@ TEST(VlfBake, PointLightDirectPass) {
             const float E = 2.f * d.y / (r * r * r);
             EXPECT_NEAR(v.irradiance()[m.firstTexel + ty * m.width + tx].x, E, 1e-5f * E);
         }
+}
+
+TEST(VlfBake, SpotAndDirectionalLightsDirectPass) {
+    // Over a floor: a spot light pointing down, whose cones put the floor's texels inside,
+    // between and outside them, and a tilted sun half hidden by a square roof. The direct pass
+    // alone gives E = I f(cos) h / r^3 + E_sun cos(theta) where the sun is not blocked, with
+    // glTF's spot falloff f written out here: clamp((c - cos_o) / (cos_i - cos_o), 0, 1)^2.
+    test::VlfSceneBuilder b;
+    const std::uint32_t floor = b.material(glm::vec3(0.5f));
+    b.quad({-1.f, 0.f, -1.f}, {-1.f, 0.f, 1.f}, {1.f, 0.f, 1.f}, {1.f, 0.f, -1.f}, floor);
+    const float roofY = 0.5f, roofHalf = 0.3f; // black: nothing bounces off it
+    b.quad({-roofHalf, roofY, -roofHalf}, {-roofHalf, roofY, roofHalf}, {roofHalf, roofY, roofHalf},
+           {roofHalf, roofY, -roofHalf}, b.material(glm::vec3(0.f)));
+    const double inner = 0.6, outer = 1.05, h = 0.45; // radians; the spot below the roof
+    PunctualLight spot;
+    spot.position = {0.f, float(h), 0.f};
+    spot.intensity = glm::vec3(2.f);
+    spot.axis = {0.f, -1.f, 0.f};
+    spot.cosInner = float(std::cos(inner));
+    spot.cosOuter = float(std::cos(outer));
+    b.lights.push_back(spot);
+    const double theta = 0.5, sunE = 3.0; // the sun 0.5 rad off the vertical, towards +x
+    PunctualLight sun;
+    sun.kind = PunctualLight::Kind::Directional;
+    sun.intensity = glm::vec3(float(sunE));
+    sun.axis = glm::normalize(glm::vec3(float(std::sin(theta)), -float(std::cos(theta)), 0.f));
+    b.lights.push_back(sun);
+    const auto scene = b.build();
+    VlfSettings s;
+    s.directionLevel = 1;
+    s.linesPerSide = 16;
+    s.tileSize = 4;
+    s.iterations = 1;
+    const Vlf v = bakeVlf(*scene, s);
+    const std::uint32_t floorFace = *scene->faceAt({0.9f, 0.f, 0.9f}, {0.f, 1.f, 0.f});
+    const FaceMap& m = v.faceMaps()[floorFace];
+    // The roof's shadow: the square moved by roofY tan(theta) towards +x, the way the sun's
+    // light travels. Texel centres within 1 mm of its edge are not judged.
+    const double shift = roofY * std::tan(theta);
+    int inside = 0, penumbra = 0, outside = 0, shadowed = 0, sunlit = 0;
+    for (std::uint32_t ty = 0; ty < m.height; ++ty)
+        for (std::uint32_t tx = 0; tx < m.width; ++tx) {
+            const std::uint32_t t = m.firstTexel + ty * m.width + tx;
+            if (v.texelCoverage()[t] <= 0.f) continue;
+            const glm::dvec3 x(v.texelCenter(floorFace, tx, ty));
+            const glm::dvec3 d = glm::dvec3(spot.position) - x;
+            const double r = glm::length(d), c = d.y / r;
+            const double f = std::pow(
+                std::clamp((c - std::cos(outer)) / (std::cos(inner) - std::cos(outer)), 0.0, 1.0),
+                2.0);
+            (c >= std::cos(inner) ? inside : c > std::cos(outer) ? penumbra : outside) += 1;
+            const double edge = std::max(std::abs(x.x - shift), std::abs(x.z)) - roofHalf;
+            if (std::abs(edge) < 1e-3) continue;
+            const bool lit = edge > 0.0;
+            (lit ? sunlit : shadowed) += 1;
+            const double E = 2.0 * f * h / (r * r * r) + (lit ? sunE * std::cos(theta) : 0.0);
+            // The spot part in float: a few ulp of h / r^3 and of the falloff's ramp.
+            EXPECT_NEAR(v.irradiance()[t].x, E, 1e-5 * (2.0 * h / (r * r * r) + sunE))
+                << "texel " << tx << "," << ty;
+        }
+    EXPECT_GT(inside, 10);
+    EXPECT_GT(penumbra, 10);
+    EXPECT_GT(outside, 10);
+    EXPECT_GT(shadowed, 10);
+    EXPECT_GT(sunlit, 10);
 }
 
 TEST(VlfBake, NonPlanarQuadsReadPiLeThroughTheFaceThatHoldsThePoint) {

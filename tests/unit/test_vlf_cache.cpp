@@ -1,8 +1,12 @@
 // The VLF cache file: round trip, stale and corrupt files rejected with a clear message; and
 // VlfSystem, which bakes or loads it and publishes the VlfField resource.
+#include "components/DirectionalLight.h"
+#include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/PointLight.h"
+#include "components/SpotLight.h"
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
@@ -15,6 +19,8 @@
 #include "test_meshes.h"
 #include "test_vlf_scenes.h"
 
+#include <glm/gtc/constants.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -280,6 +286,41 @@ TEST(VlfSystem, PublishesTheFieldAndMapsSpecularFacesToEntities) {
     ASSERT_TRUE(again.ctx().contains<VlfField>());
     EXPECT_EQ(again.ctx().get<VlfField>().vlf.tiles(), field.vlf.tiles());
     std::filesystem::remove(settings.cacheFile);
+}
+
+TEST(VlfScene, ReadsPointSpotAndDirectionalLightsButNotStandIns) {
+    Registry world;
+    addQuad(world, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, Material{});
+    const auto light = [&](const glm::mat4& at) {
+        const Entity e = world.create();
+        world.emplace<WorldTransform>(e, at);
+        return e;
+    };
+    world.emplace<PointLight>(light(glm::translate(glm::mat4(1.f), {0.f, 1.f, 0.f})),
+                              PointLight{{1.f, 0.5f, 0.25f}, 2.f});
+    world.emplace<SpotLight>(light(glm::translate(glm::mat4(1.f), {0.f, 1.f, 0.f})),
+                             SpotLight{glm::vec3(1.f), 3.f, 0.2f, 0.4f});
+    // The sun shines along its local -z turned -90 degrees about x: straight down.
+    world.emplace<DirectionalLight>(
+        light(glm::rotate(glm::mat4(1.f), -glm::half_pi<float>(), glm::vec3(1.f, 0.f, 0.f))),
+        DirectionalLight{{1.f, 0.9f, 0.8f}, 5.f});
+    const Entity bulb = light(glm::translate(glm::mat4(1.f), {0.f, 1.f, 0.f}));
+    world.emplace<PointLight>(bulb, PointLight{});
+    world.emplace<LightStandIn>(bulb);
+
+    const auto scene = VlfScene::fromRegistry(world);
+    ASSERT_EQ(scene->lights().size(), 3u);
+    int local = 0;
+    for (const PunctualLight& l : scene->lights()) {
+        if (l.kind == PunctualLight::Kind::Local) {
+            ++local;
+            continue;
+        }
+        EXPECT_NEAR(l.axis.y, -1.f, 1e-6f);
+        EXPECT_NEAR(glm::length(l.axis), 1.f, 1e-6f);
+        EXPECT_EQ(l.intensity, glm::vec3(5.f, 4.5f, 4.f));
+    }
+    EXPECT_EQ(local, 2);
 }
 
 TEST(VlfSystem, EmptySceneIsAClearError) {
