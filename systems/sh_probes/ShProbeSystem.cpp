@@ -212,7 +212,7 @@ bool ShProbeSystem::lightAt(const Light& light, const glm::vec3& x, glm::vec3& t
     return true;
 }
 
-void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const {
+std::uint32_t ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const {
     const std::uint32_t n = mSettings.raysPerProbe;
     const glm::vec3 x = volume.grid().position(probe);
     const glm::mat3 rotation = probeRotation(mSettings.seed, probe);
@@ -225,7 +225,7 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
 
     std::vector<glm::vec3> radiance(n, glm::vec3(0.f));
     std::vector<glm::vec3> diffuse(n, glm::vec3(0.f)); // albedo / pi at front hits
-    std::uint32_t backFaces = 0;
+    std::uint32_t backFaces = 0, nonFinite = 0;
     for (std::uint32_t k = 0; k < n; ++k) {
         if (!hits[k]) {
             radiance[k] = mEnvironment;
@@ -246,6 +246,11 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
                 e = (1.f - u - v) * s.irradiance[tri[0]] + u * s.irradiance[tri[1]] +
                     v * s.irradiance[tri[2]];
             }
+        }
+        // A NaN written by some other system would spread to every avatar near this probe.
+        if (!isFinite(e)) {
+            e = glm::vec3(0.f);
+            ++nonFinite;
         }
         diffuse[k] = s.albedo * glm::one_over_pi<float>();
         radiance[k] = s.emission + diffuse[k] * e;
@@ -325,14 +330,24 @@ void ShProbeSystem::projectProbe(std::uint32_t probe, ProbeVolume& volume) const
 
     volume.coefficients(probe) = coefficients;
     volume.setEnabled(probe, float(backFaces) <= mSettings.backFaceShare * float(n));
+    return nonFinite;
 }
 
 void ShProbeSystem::projectProbes(const Registry& registry, std::span<const std::uint32_t> probes) {
     if (!mBuilt || probes.empty()) return;
     snapshot(registry);
     ProbeVolume& volume = *mVolume;
+    std::vector<std::uint32_t> nonFinite(probes.size());
     tbb::parallel_for(std::size_t(0), probes.size(),
-                      [&](std::size_t i) { projectProbe(probes[i], volume); });
+                      [&](std::size_t i) { nonFinite[i] = projectProbe(probes[i], volume); });
+    std::uint64_t hits = 0;
+    for (const std::uint32_t k : nonFinite)
+        hits += k;
+    if (hits > 0 && !mWarnedNonFinite) {
+        mWarnedNonFinite = true;
+        logWarning("SH probes: ", hits, " probe rays met VertexIrradiance that is not finite ",
+                   "(NaN or infinity), read as no light; reported once");
+    }
     for (const std::uint32_t p : probes)
         if (mStale[p]) {
             mStale[p] = 0;

@@ -147,7 +147,9 @@ private:
     /// it; false when it sends nothing to x.
     static bool lightAt(const Light& light, const glm::vec3& x, glm::vec3& toward, float& distance,
                         glm::vec3& irradiance);
-    void projectProbe(std::uint32_t probe, ProbeVolume& volume) const;
+    /// Projects one probe; returns how many of its rays met vertex irradiance that is not
+    /// finite (read as none).
+    std::uint32_t projectProbe(std::uint32_t probe, ProbeVolume& volume) const;
     void computeVisibility(std::uint32_t cell, ProbeVolume& volume) const;
     void markNear(const glm::vec3& point, float radius);
     void markNearBox(const Aabb& box, float radius);
@@ -181,6 +183,7 @@ private:
     std::vector<std::uint8_t> mCellQueued;
     std::vector<Entity> mAvatarEntities;
     std::vector<Entity> mWarnedOutside; ///< avatars named for leaving the probe volume
+    bool mWarnedNonFinite = false;      ///< non-finite vertex irradiance reported once
 };
 
 } // namespace qgi

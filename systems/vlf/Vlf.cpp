@@ -289,11 +289,12 @@ VlfMemory Vlf::memory() const {
     mem.renderBytes =
         mem.tileCells * sizeof(glm::vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
     // The bake adds, per cell: unshot, next and incident (RGB) plus the incident weight and the
-    // incident total for mirrors (RGBA); per texel: unshot and next irradiance, and one
-    // per-thread accumulation copy (counted once).
+    // incident total for mirrors (RGBA); per texel: unshot and received irradiance, and one
+    // accumulation copy per work chunk.
+    const std::size_t chunks = std::min(kBakeChunks, mem.directions);
     mem.bakeBytes = mem.renderBytes +
                     mem.tileCells * (3 * sizeof(glm::vec3) + sizeof(float) + sizeof(glm::vec4)) +
-                    mem.diffuseTexels * 3 * sizeof(glm::vec3);
+                    mem.diffuseTexels * (2 + chunks) * sizeof(glm::vec3);
     return mem;
 }
 

@@ -46,6 +46,11 @@ struct TileBlock {
     std::uint32_t firstSlot = 0;
 };
 
+/// The bake's fixed number of work chunks (at most one per direction): each owns a copy of the
+/// irradiance texels, and the copies are summed in order, so the result does not depend on
+/// the thread count or scheduling.
+inline constexpr std::size_t kBakeChunks = 16;
+
 /// Memory of the structure (seed 002 section 1.7 of the digest): element counts and bytes.
 struct VlfMemory {
     std::size_t directions = 0;

@@ -21,9 +21,6 @@ namespace {
 
 constexpr float kInvPi = 0.31830988618f;
 constexpr std::size_t kMaxCrossings = 256;
-/// Fixed number of work chunks: each owns its accumulation buffer and the chunks are reduced
-/// in order, so the result does not depend on the thread count or scheduling.
-constexpr std::size_t kChunks = 16;
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) {
@@ -397,7 +394,7 @@ private:
     VlfIterationStats transportPass(int iteration, VlfBakeStats& bake) {
         const std::size_t l = mDirs.size();
         std::fill(mIncident.begin(), mIncident.end(), glm::vec4(0.f));
-        std::vector<ChunkAccum> chunks(std::min(kChunks, l));
+        std::vector<ChunkAccum> chunks(std::min(kBakeChunks, l));
         std::atomic<std::size_t> done{0};
         std::atomic<int> reported{0};
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks.size(), 1),

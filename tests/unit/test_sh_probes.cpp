@@ -341,6 +341,37 @@ TEST(ShProbes, FloorReflectsItsVertexIrradiance) {
     scene.expectUniformFloor(double(albedo) / kPi * glm::dvec3(e0));
 }
 
+TEST(ShProbes, ANonFiniteVertexIrradianceIsReadAsNoLight) {
+    // One NaN vertex (another system's bug) must not reach the probes, and through them every
+    // avatar nearby: the triangles around it read as unlit (on this floor of 50 m cells, most
+    // of what the probes see), the rest of the floor as before.
+    const glm::vec3 e0(30.f, 20.f, 10.f);
+    const auto meanL00 = [&](bool poisoned) {
+        FloorScene scene(floorSettings(false), grey(0.6f));
+        VertexIrradiance& vi = scene.world.emplace<VertexIrradiance>(scene.floor);
+        vi.irradiance.assign(scene.world.get<Mesh>(scene.floor).positions.size(), e0);
+        if (poisoned) {
+            vi.irradiance[12] = glm::vec3(std::numeric_limits<float>::quiet_NaN()); // the middle
+            vi.irradiance[3].y = std::numeric_limits<float>::infinity();
+        }
+        scene.run();
+        const ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
+        glm::dvec3 sum(0.0);
+        for (std::uint32_t p = 0; p < volume.probeCount(); ++p)
+            for (const glm::vec3& c : volume.coefficients(p)) {
+                EXPECT_TRUE(std::isfinite(c.x) && std::isfinite(c.y) && std::isfinite(c.z))
+                    << "probe " << p;
+                sum += glm::dvec3(volume.coefficients(p)[0]);
+            }
+        return sum / double(volume.probeCount());
+    };
+    const glm::dvec3 clean = meanL00(false), poisoned = meanL00(true);
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_LT(poisoned[c], 0.1 * clean[c]); // the hole shows
+        EXPECT_GT(poisoned[c], 0.0);            // and the rest of the floor
+    }
+}
+
 TEST(ShProbes, HybridModeAddsTheSunOnTheFloorButNotAtTheProbe) {
     // Sun straight down, 50 W/m^2: the floor's radiance is albedo / pi x 50 (shadow rays), so
     // the probe facing down gets albedo x 50 and facing up nothing but the floor's edge term;

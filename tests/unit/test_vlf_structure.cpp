@@ -332,7 +332,9 @@ TEST(VlfStructure, MemoryIsAccounted) {
     EXPECT_EQ(mem.diffuseTexels, texels);
     // Rendering keeps RGBA float per cell and RGB float per texel, plus the index.
     EXPECT_GE(mem.renderBytes, mem.tileCells * 16 + texels * 12);
-    EXPECT_GT(mem.bakeBytes, mem.renderBytes);
+    // The bake adds 56 B per cell (three RGB and two RGBA arrays, one of them a weight) and per
+    // texel unshot and received irradiance plus one copy per work chunk (16 here).
+    EXPECT_EQ(mem.bakeBytes - mem.renderBytes, mem.tileCells * 56 + texels * 18 * 12);
 }
 
 TEST(VlfStructure, BadSettingsAreRejected) {
