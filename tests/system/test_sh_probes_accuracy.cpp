@@ -27,14 +27,17 @@
 //    integral of L over the sphere for any non-negative radiance
 //    (runtime/math/SphericalHarmonics.h, kDirectionalMaxError).
 // Checks:
-//  1. per point, the integral of L over the sphere (uniform directions; 4 pi mean L). It is
-//     band 0 of the SH (sh::integral), which truncation leaves exact: quadrature and spread
-//     only: a probe system 5 % too bright fails it at one of the nodes;
+//  1. per point, each of the nine SH coefficients, the integral of L Y_i over the sphere
+//     (uniform directions; 4 pi mean L Y_i, the harmonics written out in double), which
+//     truncation leaves exact: quadrature, spread and the basis constants' six digits only.
+//     At the nodes the bound is a few tenths of a per cent of L00: a probe system 5 % too
+//     bright fails it, and so does one whose x terms (L11, L2-2, L21) change sign (21
+//     comparisons each, besides 170 irradiances);
 //  2. per point and each of kNormals normals, the irradiance E(n) (cosine-weighted
 //     directions; pi mean L), truncation included.
-// About 800 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
-// test has one chance in a thousand of failing a correct system (the seeds are fixed, so a
-// given build passes or fails every time).
+// About 1000 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
+// test has about one chance in a thousand of failing a correct system (the seeds are fixed,
+// so a given build passes or fails every time).
 #include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
 #include "components/Material.h"
@@ -59,6 +62,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -75,6 +79,9 @@ constexpr std::uint32_t kGatherSamples = 1u << 15; // directions per (point, nor
 constexpr std::uint32_t kSphereSamples = 1u << 20; // per point: the integral's check is tight
 constexpr double kGatherZ = 5.0;                   // normal, two-sided 5.7e-7
 constexpr std::uint32_t kNormals = 32;
+// The engine's basis constants have six digits (1.6e-6 relative at most), the test's are
+// exact: a coefficient differs by at most that share of sum |L Y_i| <= 1.1 x the integral of L.
+constexpr double kBasisRounding = 2e-6;
 
 void fillVertexIrradianceFromReference(Registry& world, const RayScene& scene) {
     reference::ReferenceSettings settings;
@@ -127,14 +134,43 @@ public:
             });
     }
 
-    /// Integral of L over the sphere around x: 4 pi mean L over uniform directions.
-    Estimate sphere(const glm::vec3& x, std::uint64_t key) const {
-        return integrate(x, key, kSphereSamples, [](double u1, double u2, glm::dvec3& d) {
+    /// The nine SH coefficients of L around x, integral of L Y_i over the sphere: 4 pi mean of
+    /// L Y_i over uniform directions, with the real harmonics written out here in double
+    /// (the engine's order: Y00; Y1-1, Y10, Y11 ~ y, z, x; Y2-2, Y2-1, Y20, Y21, Y22).
+    std::array<Estimate, sh::kCoefficientCount> projection(const glm::vec3& x,
+                                                           std::uint64_t key) const {
+        const double pi = glm::pi<double>();
+        const double y0 = 0.5 / std::sqrt(pi), y1 = std::sqrt(3.0 / (4.0 * pi)),
+                     y2 = std::sqrt(15.0 / (4.0 * pi)), y20 = std::sqrt(5.0 / (16.0 * pi)),
+                     y22 = std::sqrt(15.0 / (16.0 * pi));
+        std::uint64_t state = key * 0x2545f4914f6cdd1dull + 17;
+        std::array<glm::dvec3, sh::kCoefficientCount> sum{}, sum2{};
+        for (std::uint32_t i = 0; i < kSphereSamples; ++i) {
+            const double u1 = uniform(state), u2 = uniform(state);
             const double z = 1.0 - 2.0 * u1, r = std::sqrt(std::max(0.0, 1.0 - z * z));
             const double phi = glm::two_pi<double>() * u2;
-            d = {r * std::cos(phi), r * std::sin(phi), z};
-            return 4.0 * glm::pi<double>();
-        });
+            const glm::dvec3 d(r * std::cos(phi), r * std::sin(phi), z);
+            const glm::dvec3 L =
+                4.0 * pi *
+                radiance(Ray{x, 0.f, glm::vec3(d), std::numeric_limits<float>::infinity()});
+            const double y[sh::kCoefficientCount] = {y0,
+                                                     y1 * d.y,
+                                                     y1 * d.z,
+                                                     y1 * d.x,
+                                                     y2 * d.x * d.y,
+                                                     y2 * d.y * d.z,
+                                                     y20 * (3.0 * d.z * d.z - 1.0),
+                                                     y2 * d.x * d.z,
+                                                     y22 * (d.x * d.x - d.y * d.y)};
+            for (int k = 0; k < sh::kCoefficientCount; ++k) {
+                sum[k] += L * y[k];
+                sum2[k] += L * y[k] * L * y[k];
+            }
+        }
+        std::array<Estimate, sh::kCoefficientCount> out;
+        for (int k = 0; k < sh::kCoefficientCount; ++k)
+            out[k] = meanAndError(sum[k], sum2[k], kSphereSamples);
+        return out;
     }
 
     /// Irradiance at x over the hemisphere of unit n: pi mean L over cosine-weighted directions.
@@ -194,6 +230,11 @@ private:
             sum += value;
             sum2 += value * value;
         }
+        return meanAndError(sum, sum2, samples);
+    }
+
+    static Estimate meanAndError(const glm::dvec3& sum, const glm::dvec3& sum2,
+                                 std::uint32_t samples) {
         const double m = samples;
         Estimate out;
         out.mean = sum / m;
@@ -295,13 +336,17 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
     std::vector<glm::vec3> normals;
     for (std::uint32_t k = 0; k < kNormals; ++k)
         normals.push_back(sh::fibonacciDirection(k, kNormals));
-    // Per point: the sphere integral, then one irradiance per normal.
+    // Per point: the projection, then one irradiance per normal.
     const std::size_t perPoint = 1 + kNormals;
+    std::vector<std::array<Estimate, sh::kCoefficientCount>> projected(points.size());
     std::vector<Estimate> gathered(points.size() * perPoint);
     tbb::parallel_for(std::size_t(0), gathered.size(), [&](std::size_t i) {
         const Point& p = points[i / perPoint];
         const std::size_t j = i % perPoint;
-        gathered[i] = j == 0 ? gather.sphere(p.x, i) : gather.irradiance(p.x, normals[j - 1], i);
+        if (j == 0)
+            projected[i / perPoint] = gather.projection(p.x, i);
+        else
+            gathered[i] = gather.irradiance(p.x, normals[j - 1], i);
     });
 
     // A quantity of the SH (integral or irradiance along n) through its replicates and through
@@ -331,7 +376,8 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
             truncated ? double(sh::kDirectionalMaxError) * integral : glm::dvec3(0.0);
         for (int c = 0; c < 3; ++c) {
             const double bound = kProbeT * probe.standardError[c] +
-                                 kGatherZ * reference.standardError[c] + spread[c] + truncation[c];
+                                 kGatherZ * reference.standardError[c] + spread[c] + truncation[c] +
+                                 kBasisRounding * integral[c];
             EXPECT_NEAR(probe.mean[c], reference.mean[c], bound)
                 << what << " at " << p.x.x << "," << p.x.y << "," << p.x.z
                 << (p.node ? " (node)" : "") << " channel " << c << ": probe standard error "
@@ -341,15 +387,19 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
         return probe;
     };
 
+    static const char* const kNames[sh::kCoefficientCount] = {"L00",  "L1-1", "L10", "L11", "L2-2",
+                                                              "L2-1", "L20",  "L21", "L22"};
     for (std::size_t i = 0; i < points.size(); ++i) {
         const Point& p = points[i];
-        const Estimate& ref = gathered[i * perPoint];
-        const Estimate probe = compare(
-            p, ref, [](const sh::ShRgb& L) { return sh::integral(L); }, false, "integral of L");
-        std::printf("point (%.3f %.3f %.3f)%s: integral of L, green: probe %.4f +- %.4f, "
-                    "gather %.4f +- %.4f\n",
-                    p.x.x, p.x.y, p.x.z, p.node ? " node" : "     ", probe.mean.g,
-                    probe.standardError.g, ref.mean.g, ref.standardError.g);
+        std::printf("point (%.3f %.3f %.3f)%s, green, probe (gather):", p.x.x, p.x.y, p.x.z,
+                    p.node ? " node" : "     ");
+        for (int k = 0; k < sh::kCoefficientCount; ++k) {
+            const Estimate& ref = projected[i][k];
+            const Estimate probe = compare(
+                p, ref, [k](const sh::ShRgb& L) { return L[k]; }, false, kNames[k]);
+            std::printf(" %s %.3f (%.3f)", kNames[k], probe.mean.g, ref.mean.g);
+        }
+        std::printf("\n");
         for (std::uint32_t k = 0; k < kNormals; ++k) {
             const glm::vec3 n = normals[k];
             compare(
