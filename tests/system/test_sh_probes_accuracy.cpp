@@ -30,9 +30,10 @@
 //  1. per point, each of the nine SH coefficients, the integral of L Y_i over the sphere
 //     (uniform directions; 4 pi mean L Y_i, the harmonics written out in double), which
 //     truncation leaves exact: quadrature, spread and the basis constants' six digits only.
-//     At the nodes the bound is a few tenths of a per cent of L00: a probe system 5 % too
-//     bright fails it, and so does one whose x terms (L11, L2-2, L21) change sign (21
-//     comparisons each, besides 170 irradiances);
+//     At the nodes the bound on L00 is 4-12 % of it (the rotations' and the gather's standard
+//     errors): a probe system 5 % too bright fails at the brightest node (L00 and L20); one
+//     whose x terms (L11, L2-2, L21) change sign fails 21 comparisons of each, besides 170
+//     irradiances;
 //  2. per point and each of kNormals normals, the irradiance E(n) (cosine-weighted
 //     directions; pi mean L), truncation included.
 // About 1000 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
