@@ -253,12 +253,17 @@ int runDemo(const DemoOptions& options) {
     prepareOutput(options.exportAvatars, "--export-avatars", inputs, written);
     // An earlier export (or an empty file made for it) is rewritten; any other file is
     // somebody's.
-    std::error_code sizeError;
-    if (options.exportIrradiance && std::filesystem::exists(*options.exportIrradiance) &&
-        std::filesystem::file_size(*options.exportIrradiance, sizeError) != 0 &&
-        !isIrradiancePly(*options.exportIrradiance))
-        fail("--export-irradiance: '", *options.exportIrradiance,
-             "' exists and is not an irradiance export of qgi's; not overwritten");
+    const auto ownExportOnly = [](const std::optional<std::string>& path, const char* option,
+                                  bool (*isExport)(const std::filesystem::path&),
+                                  const char* what) {
+        std::error_code sizeError;
+        if (path && std::filesystem::exists(*path) &&
+            std::filesystem::file_size(*path, sizeError) != 0 && !isExport(*path))
+            fail(option, ": '", *path, "' exists and is not ", what, " of qgi's; not overwritten");
+    };
+    ownExportOnly(options.exportIrradiance, "--export-irradiance", isIrradiancePly,
+                  "an irradiance export");
+    ownExportOnly(options.exportAvatars, "--export-avatars", isAvatarShCsv, "an avatar SH export");
     // Cache files are rewritten when stale: never over somebody's file.
     if (!options.pointCacheFile.empty())
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,

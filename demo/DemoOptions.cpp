@@ -195,7 +195,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
         "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
         "real basis over world x, y, z). In hybrid mode, as the probes shade, it leaves "
-        "out the direct light the renderer draws");
+        "out the direct light the renderer draws. An existing file that is not an earlier "
+        "export is not overwritten");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
     app.add_flag("--point-cache", o.pointCache,
                  "Build the point cache (soft shadows of area lights and indirect light per "

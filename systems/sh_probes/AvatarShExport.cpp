@@ -41,6 +41,16 @@ std::string avatarShCsvHeader() {
     return header;
 }
 
+bool isAvatarShCsv(const std::filesystem::path& path) {
+    std::error_code error;
+    if (!std::filesystem::is_regular_file(path, error)) return false; // a FIFO would block
+    std::ifstream file(path, std::ios::binary);
+    const std::string header = avatarShCsvHeader() + '\n';
+    std::string head(header.size(), '\0');
+    file.read(head.data(), std::streamsize(head.size()));
+    return std::size_t(file.gcount()) == head.size() && head == header;
+}
+
 void exportAvatarSh(const Registry& registry, const std::filesystem::path& path) {
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     if (!out) fail("cannot open '", path.string(), "' for writing the avatar SH export");

@@ -11,6 +11,10 @@ class Registry;
 /// L20, L21, L22 in turn, the columns <name>_r,<name>_g,<name>_b.
 std::string avatarShCsvHeader();
 
+/// Whether `path` is a regular file that starts with avatarShCsvHeader()'s line: an earlier
+/// export, which a new one may replace.
+bool isAvatarShCsv(const std::filesystem::path& path);
+
 /** Writes one row per Avatar (with WorldTransform and ShLighting), in view order: its Name
  *  (or "entity<index>" without one; quoted when it holds a comma, quote or line break), its
  *  world position x, y, z in metres (the WorldTransform translation), then the 27

@@ -3,6 +3,7 @@
 #include "runtime/io/Ply.h"
 #include "runtime/io/Png.h"
 #include "runtime/scene/SceneLoader.h"
+#include "systems/sh_probes/AvatarShExport.h"
 
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
@@ -407,6 +408,21 @@ TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
                   .exitCode,
               0);
     EXPECT_TRUE(isIrradiancePly(empty));
+
+    // So does --export-avatars, which then rewrites its own export.
+    const fs::path sheet = dir / "budget.csv";
+    std::ofstream(sheet) << "item,cost\n";
+    const std::string avatars = "--scene cornell --headless --frames 1 --photons 1000 --vlf off "
+                                "--export-avatars ";
+    const RunResult refused = runDemo(avatars + sheet.string());
+    EXPECT_EQ(refused.exitCode, 1) << refused.output;
+    EXPECT_NE(refused.output.find("is not an avatar SH export"), std::string::npos)
+        << refused.output;
+    EXPECT_EQ(fs::file_size(sheet), 10u);
+    const fs::path own = dir / "avatars.csv";
+    ASSERT_EQ(runDemo(avatars + own.string()).exitCode, 0);
+    EXPECT_TRUE(isAvatarShCsv(own));
+    EXPECT_EQ(runDemo(avatars + own.string()).exitCode, 0) << "an earlier export is replaced";
 }
 
 TEST(DemoSmoke, AScreenshotNamedAfterItsImageWritesThatImage) {
