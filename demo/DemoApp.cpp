@@ -240,6 +240,23 @@ bool wantVlf(const Registry& registry) {
     return true;
 }
 
+/// The cache file an option names: "none" none, "auto" <scene><extension> in the working
+/// folder (none, with a warning, when somebody's file is there), else the path given (checked
+/// before the load by checkCacheTarget).
+std::filesystem::path cacheFileOf(const std::string& option, const char* name,
+                                  const Registry& world, const char* extension,
+                                  std::string_view magic, const char* what) {
+    if (option == "none") return {};
+    if (option != "auto") return option;
+    std::filesystem::path file = world.ctx().get<SceneInfo>().name + extension;
+    if (!mayReplaceWithCache(file, magic)) {
+        logWarning(name, " auto: ", file.string(), " exists and is not ", what,
+                   " file; baking without a cache file");
+        file.clear();
+    }
+    return file;
+}
+
 } // namespace
 
 int runDemo(const DemoOptions& options) {
@@ -265,7 +282,9 @@ int runDemo(const DemoOptions& options) {
                   "an irradiance export");
     ownExportOnly(options.exportAvatars, "--export-avatars", isAvatarShCsv, "an avatar SH export");
     // Cache files are rewritten when stale: never over somebody's file.
-    if (!options.pointCacheFile.empty())
+    const bool pointCacheNamed =
+        options.pointCacheFile != "auto" && options.pointCacheFile != "none";
+    if (pointCacheNamed)
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
                          "point cache file (--point-cache-file)");
     if (options.vlfCache != "auto" && options.vlfCache != "none")
@@ -321,23 +340,14 @@ int runDemo(const DemoOptions& options) {
         vlf.bake.directionLevel = options.vlfLevel;
         vlf.bake.linesPerSide = options.vlfLines;
         vlf.bake.seed = options.seed;
-        if (options.vlfCache == "auto") {
-            vlf.cacheFile = world.ctx().get<SceneInfo>().name + ".vlf";
-            if (!mayReplaceWithCache(vlf.cacheFile, vlf::VlfCache::kMagic)) {
-                logWarning("--vlf-cache auto: ", vlf.cacheFile.string(),
-                           " exists and is not a VLF cache; baking without a cache file");
-                vlf.cacheFile.clear();
-            }
-        } else if (options.vlfCache != "none") {
-            vlf.cacheFile = options.vlfCache;
-        }
+        vlf.cacheFile = cacheFileOf(options.vlfCache, "--vlf-cache", world, ".vlf",
+                                    vlf::VlfCache::kMagic, "a VLF cache");
         frameSettings.vlf = vlf;
     }
     frameSettings.irradiance.hybrid = options.mode == "hybrid";
     frameSettings.probes->hybrid = options.mode == "hybrid";
     frameSettings.probes->seed = options.seed;
-    const bool pointCache =
-        options.pointCache || !options.pointCacheFile.empty() || options.showPoints;
+    const bool pointCache = options.pointCache || pointCacheNamed || options.showPoints;
     const bool anyTagged = !world.view<const PointCacheShaded>().entities().empty();
     if (pointCache && options.mode != "hybrid")
         logWarning("--point-cache: the point cache shades hybrid mode only; not built");
@@ -347,7 +357,10 @@ int runDemo(const DemoOptions& options) {
     else if (pointCache) {
         frameSettings.pointCache = PointCacheSettings{};
         frameSettings.pointCache->seed = options.seed;
-        frameSettings.pointCache->cacheFile = options.pointCacheFile;
+        frameSettings.pointCache->cacheFile =
+            cacheFileOf(options.pointCacheFile, "--point-cache-file", world, ".pcache",
+                        kPointCacheMagic, "a point cache")
+                .string();
     }
     RenderSettings& render = *frameSettings.render;
     render.width = window.width();

@@ -202,8 +202,9 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                  "Build the point cache (soft shadows of area lights and indirect light per "
                  "fragment on the surfaces tagged for it; hybrid mode)");
     app.add_option("--point-cache-file", o.pointCacheFile,
-                   "Point cache file: loaded when it matches the scene and settings, else "
-                   "rebuilt and written (implies --point-cache)");
+                   "Point cache file (auto: <scene>.pcache in the working folder; none: bake "
+                   "every start): loaded when it matches the scene and settings, else rebaked "
+                   "and written. A file name implies --point-cache");
     app.add_flag("--show-points", o.showPoints,
                  "Start with the point-set view on (key P toggles it; implies --point-cache)");
 

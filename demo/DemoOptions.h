@@ -38,7 +38,8 @@ struct DemoOptions {
     std::optional<std::string> exportAvatars;    ///< .csv path: avatars' SH after the last frame
     bool quiet = false;
     bool pointCache = false;       ///< build (or load) the point cache; shade PointCacheShaded
-    std::string pointCacheFile;    ///< its cache file; empty: build every start
+    /// Its cache file; "auto": <scene>.pcache in the working folder, "none": build every start.
+    std::string pointCacheFile = "auto";
     bool showPoints = false;       ///< start with the point-set view on (key P toggles it)
 };
 

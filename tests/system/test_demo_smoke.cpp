@@ -37,8 +37,11 @@ struct RunResult {
 };
 
 /// Runs the demo with `arguments`, the variables in `unset` removed from its environment.
-RunResult runDemo(const std::string& arguments, std::initializer_list<const char*> unset = {}) {
-    std::string command = "env";
+/// Runs qgi-demo with `arguments`, without the environment variables in `unset`, in the
+/// folder `workingDir` (when given).
+RunResult runDemo(const std::string& arguments, std::initializer_list<const char*> unset = {},
+                  const fs::path& workingDir = {}) {
+    std::string command = workingDir.empty() ? "env" : "cd '" + workingDir.string() + "' && env";
     for (const char* name : unset)
         command.append(" -u ").append(name);
     command.append(" ").append(QGI_DEMO_PATH).append(" ").append(arguments).append(" 2>&1");
@@ -553,6 +556,43 @@ TEST(DemoSmoke, SameSeedSameImage) {
     const ImageF ia = readExr(a + ".exr"), ib = readExr(b + ".exr");
     ASSERT_EQ(ia.rgba.size(), ib.rgba.size());
     EXPECT_TRUE(ia.rgba == ib.rgba) << "two runs with the same seed rendered different images";
+}
+
+TEST(DemoSmoke, ThePointCacheIsBakedOnceThenLoadedAndShadesTheTaggedFloor) {
+    // A floor tagged for the point cache under a blocker and an emissive panel (hybrid mode).
+    const fs::path dir = scratchDir() / "point_cache";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path scene = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good" / "point_cache_room.gltf";
+    const std::string common = "--scene " + scene.string() +
+                               " --headless --frames 2 --photons 20000 --width 64 --height 64 ";
+    const auto shot = [&](const std::string& name, const std::string& options) {
+        const RunResult run =
+            runDemo(common + options + " --screenshot " + (dir / name).string(), {}, dir);
+        EXPECT_EQ(run.exitCode, 0) << options << run.output;
+        return std::pair{run.output, readExr((dir / name).string() + ".exr")};
+    };
+    // First start: baked, and written beside the run as <scene>.pcache.
+    const auto [baked, first] = shot("first", "--point-cache");
+    EXPECT_NE(baked.find(" darts ("), std::string::npos) << baked; // the bake's summary
+    EXPECT_TRUE(fs::exists(dir / "point_cache_room.pcache"));
+    // Next start: loaded, and the same image.
+    const auto [loaded, again] = shot("again", "--point-cache");
+    EXPECT_NE(loaded.find("point cache: loaded"), std::string::npos) << loaded;
+    EXPECT_EQ(loaded.find(" darts ("), std::string::npos) << loaded;
+    EXPECT_TRUE(first.rgba == again.rgba) << "the loaded cache shades differently";
+    // --point-cache-file none bakes again and writes nothing.
+    fs::remove(dir / "point_cache_room.pcache");
+    const auto [none, unused] = shot("none", "--point-cache --point-cache-file none");
+    EXPECT_NE(none.find(" darts ("), std::string::npos) << none;
+    EXPECT_FALSE(fs::exists(dir / "point_cache_room.pcache"));
+    // The cache is what shades the floor: without it, and with the points drawn, the image
+    // differs.
+    const auto [plain, withoutCache] = shot("plain", "");
+    EXPECT_EQ(plain.find("point cache"), std::string::npos) << plain;
+    EXPECT_FALSE(first.rgba == withoutCache.rgba);
+    const auto [dots, points] = shot("points", "--show-points");
+    EXPECT_FALSE(first.rgba == points.rgba);
 }
 
 } // namespace

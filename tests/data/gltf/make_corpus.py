@@ -234,6 +234,54 @@ def good():
         "buffers": [{"byteLength": len(b.data), "uri": b.uri()}],
     })
 
+    # point_cache_room.gltf: a 2 m floor tagged for the point cache under a square blocker and
+    # a downward emissive panel (test_demo_smoke.cpp bakes it through the demo).
+    b = Buffer()
+
+    def horizontal(half, y, up):
+        corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
+        if not up:
+            corners.reverse()
+        values = [c for x, z in corners for c in (x, y, -z)]
+        position = b.floats(values, "VEC3")
+        normal = b.floats([0, 1 if up else -1, 0] * 4, "VEC3", bounds=False)
+        indices = b.accessor(b.view(struct.pack("<6H", 0, 1, 2, 0, 2, 3)), USHORT, 6, "SCALAR")
+        return position, normal, indices
+
+    def mesh(name, quad, material):
+        position, normal, indices = quad
+        return {"name": name, "primitives": [{"attributes": {"POSITION": position, "NORMAL": normal},
+                                               "indices": indices, "material": material}]}
+
+    write(out / "point_cache_room.gltf", {
+        "asset": {"version": "2.0", "generator": "make_corpus.py"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3]}],
+        "nodes": [
+            {"name": "Floor", "mesh": 0, "extras": {"pointCache": True}},
+            {"name": "Blocker", "mesh": 1},
+            {"name": "Panel", "mesh": 2},
+            {"name": "Camera", "camera": 0, "translation": [0, 2.5, 0],
+             "rotation": [-math.sqrt(0.5), 0, 0, math.sqrt(0.5)]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.05}}],
+        "meshes": [mesh("floor", horizontal(1, 0, True), 0),
+                   mesh("blocker", horizontal(0.3, 0.75, True), 0),
+                   mesh("panel", horizontal(0.25, 1.5, False), 1)],
+        "materials": [
+            {"name": "Grey", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1],
+                                                      "metallicFactor": 0}},
+            {"name": "Lamp", "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1],
+                                                      "metallicFactor": 0},
+             "emissiveFactor": [1, 1, 1],
+             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 10}}},
+        ],
+        "extensionsUsed": ["KHR_materials_emissive_strength"],
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": len(b.data), "uri": b.uri()}],
+    })
+
     # box.glb: binary container, the texture stored in a buffer view of the BIN chunk.
     b = Buffer()
     position = b.floats(QUAD, "VEC3")
