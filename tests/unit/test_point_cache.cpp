@@ -18,6 +18,7 @@
 
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+#include <oneapi/tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -104,6 +105,12 @@ TEST(PointCacheSettings, DefaultsScaleWithTheScene) {
     EXPECT_FLOAT_EQ(s.rMin, s.rMax / kRMaxPerRMin);
     EXPECT_FLOAT_EQ(s.aoDistance, 2.f * s.rMax);
     EXPECT_FLOAT_EQ(s.detpRadius, 3.f * s.rMax);
+    // A spacing finer than the bake's grid can index (it would overflow its cell keys).
+    PointCacheSettings fine;
+    fine.rMin = fine.rMax = 1e-6f;
+    EXPECT_THROW(resolvePointCacheSettings(fine, box), Error);
+    fine.rMin = fine.rMax = 2e-5f;
+    EXPECT_NO_THROW(resolvePointCacheSettings(fine, box));
 }
 
 TEST(PointCacheSettings, RadiusMapIsBoundedAndMonotone) {
@@ -175,6 +182,17 @@ TEST(PointSetBuild, SameSeedSameSetOtherSeedOtherSet) {
     const PointCache c = buildSet(room.registry, other, nullptr);
     EXPECT_TRUE(c.size() != a.size() ||
                 std::memcmp(a.position.data(), c.position.data(), a.size() * sizeof(glm::vec3)));
+    // Nor does the set depend on how many threads build it.
+    PointCache single;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        single = buildSet(room.registry, roomSettings(), nullptr);
+    }
+    ASSERT_EQ(single.size(), a.size());
+    EXPECT_EQ(std::memcmp(a.position.data(), single.position.data(), a.size() * sizeof(glm::vec3)),
+              0);
+    EXPECT_EQ(a.radius, single.radius);
+    EXPECT_EQ(a.ao, single.ao);
 }
 
 TEST(PointSetBuild, DensityIsHigherAtTheCreaseThanOnTheOpenFloor) {

@@ -521,6 +521,8 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
 
     // Move the blocker 0.4 m along x.
     const glm::vec3 offset(0.4f, 0.f, 0.f);
+    std::vector<float> queueKey(cache.size()); // distance to the blocker's centre, old or new
+    std::vector<std::uint32_t> queued;
     scene.registry.patch<WorldTransform>(scene.blocker).matrix = translation(blockerOld + offset);
     rays.syncMoved(scene.registry);
     system.update(scene.registry, FrameContext{2});
@@ -537,6 +539,8 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
         std::size_t expected = 0;
         for (std::size_t p = 0; p < cache.size(); ++p) {
             const glm::vec3 x = cache.position[p];
+            queueKey[p] = std::min(glm::length(blockerOld + box.center() - x),
+                                   glm::length(blockerOld + offset + box.center() - x));
             bool hit = false;
             for (const AreaLight& l : system.areaLights()) {
                 if (glm::dot(cache.normal[p], l.centre - x) < -l.boundRadius) continue;
@@ -547,6 +551,7 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
                 }
             }
             expected += hit ? 1 : 0;
+            if (hit) queued.push_back(std::uint32_t(p));
         }
         EXPECT_EQ(stats.queued, expected);
         EXPECT_LT(stats.shadowCandidates, cache.size()); // the culling culled something
@@ -578,6 +583,19 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     }
     EXPECT_GT(far, 50u);
     EXPECT_LE(changed, settings.updateBudget);
+    // Nearest first: every point whose value changed is among the updateBudget queued points
+    // nearest to the blocker (a refreshed point may keep its value, so the test cannot ask
+    // for all of them). Keys within a float rounding of the cut count as tied.
+    std::sort(queued.begin(), queued.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return queueKey[a] < queueKey[b]; });
+    const float cut = queueKey[queued[settings.updateBudget - 1]];
+    ASSERT_LT(cut, 0.9f * queueKey[queued.back()]); // the budget leaves far points waiting
+    std::size_t changedBeyondTheCut = 0;
+    for (std::size_t p = 0; p < cache.size(); ++p)
+        if (std::memcmp(&cache.direct[p], &before.direct[p], sizeof(glm::vec3)) != 0)
+            changedBeyondTheCut += queueKey[p] > cut * (1.f + 1e-5f);
+    EXPECT_EQ(changedBeyondTheCut, 0u);
+    EXPECT_GT(changed, 0u); // and some of them did change
 
     // Drain the queue: every point then holds exactly the value a fresh shading gives.
     for (std::uint64_t f = 3; f < 200 && system.lastFrame().pending > 0; ++f) {
