@@ -32,7 +32,8 @@ TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
     GlWindow context(test::testWindow(kSize, kSize, "qgi test_render_point_cache"));
     {
         Registry world;
-        // A 4 x 4 m floor at y = 0 facing up, no lights: only the cache lights it.
+        // A 4 x 4 m floor at y = 0 facing up, no lights: the cache lights it where its points
+        // reach, its per-vertex irradiance elsewhere.
         const Entity floor = world.create();
         Mesh& mesh = world.emplace<Mesh>(floor);
         mesh.positions = {{-2.f, 0.f, 2.f}, {2.f, 0.f, 2.f}, {2.f, 0.f, -2.f}, {-2.f, 0.f, -2.f}};
@@ -42,7 +43,11 @@ TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
         Material material;
         material.baseColor = glm::vec3(kAlbedo);
         world.emplace<Material>(floor, material);
-        world.emplace<VertexIrradiance>(floor).irradiance.assign(4, glm::vec3(0.f));
+        // Where no point reaches, the shader falls back to this per-vertex irradiance.
+        const glm::vec3 vertexIrradiance(0.37f, 0.21f, 0.11f);
+        VertexIrradiance& vi = world.emplace<VertexIrradiance>(floor);
+        vi.irradiance.assign(4, vertexIrradiance);
+        vi.dirty.push_back({0, 4});
         world.emplace<PointCacheShaded>(floor);
 
         // The camera kHeight above the origin looking straight down (local -Z to world -Y).
@@ -89,7 +94,8 @@ TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
                 const glm::vec3 at = glm::vec3(pose[3]) + (kHeight / -dir.y) * dir;
                 if (std::abs(at.x) > 1.98f || std::abs(at.z) > 1.98f) continue;
                 const PointCacheSample s = cache.sample(at, {0.f, 1.f, 0.f});
-                const glm::vec3 expected = kAlbedo / glm::pi<float>() * s.irradiance();
+                const glm::vec3 expected =
+                    kAlbedo / glm::pi<float>() * (s.count > 0 ? s.irradiance() : vertexIrradiance);
                 (s.count > 0 ? cached : fallback) += 1;
                 const float* actual = hdr.pixel(x, y);
                 for (int c = 0; c < 3; ++c)
