@@ -14,7 +14,8 @@ struct Material {
     float roughness = 1.f;         ///< perceptual roughness; 0 is a mirror
     std::int32_t baseColorTexture = -1; ///< index into the TextureLibrary resource, -1: none
     /// Modified Phong specular reflectance k_s, linear RGB (the VLF's glossy and mirror part);
-    /// zero for a purely diffuse surface. baseColor + specular should not exceed 1 per channel.
+    /// zero for a purely diffuse surface. baseColor + specular must not exceed 1 per channel
+    /// (the VLF refuses such a material).
     glm::vec3 specular{0.f};
     /// Modified Phong exponent n_s of the specular lobe; 0 means an ideal mirror.
     float phongExponent = 0.f;

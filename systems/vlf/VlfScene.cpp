@@ -83,6 +83,13 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
             if (!finite(vm.diffuse) || !finite(vm.emission) || !finite(vm.specular) ||
                 !std::isfinite(vm.phongExponent) || vm.phongExponent < 0.f)
                 fail(who(registry, e), ": Material has a non-finite or negative field");
+            // A surface that reflects more than it receives makes every bounce brighter.
+            for (int c = 0; c < 3; ++c)
+                if (vm.diffuse[c] < 0.f || vm.specular[c] < 0.f || vm.emission[c] < 0.f ||
+                    vm.diffuse[c] + vm.specular[c] > 1.f + 1e-6f)
+                    fail(who(registry, e), ": Material reflects more than it receives or a ",
+                         "negative share (channel ", c, ": diffuse ", vm.diffuse[c], ", specular ",
+                         vm.specular[c], "); baseColor + specular must lie in [0, 1] per channel");
             const std::uint32_t g = std::uint32_t(materials.size());
             materials.push_back(vm);
             entities.push_back(e);

@@ -5,6 +5,7 @@
 #include "components/Material.h"
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -321,6 +322,33 @@ TEST(VlfScene, ReadsPointSpotAndDirectionalLightsButNotStandIns) {
         EXPECT_EQ(l.intensity, glm::vec3(5.f, 4.5f, 4.f));
     }
     EXPECT_EQ(local, 2);
+}
+
+TEST(VlfScene, AMaterialThatReflectsMoreThanItReceivesIsAClearError) {
+    for (const auto& [diffuse, specular] :
+         {std::pair{0.5f, 0.6f}, std::pair{-0.1f, 0.5f}, std::pair{0.5f, -0.1f}}) {
+        Registry world;
+        Material m;
+        m.baseColor = glm::vec3(0.2f, diffuse, 0.2f);
+        m.specular = glm::vec3(0.2f, specular, 0.2f);
+        m.phongExponent = 10.f;
+        const Entity e = addQuad(world, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, m);
+        world.emplace<Name>(e, Name{"polished floor"});
+        try {
+            VlfScene::fromRegistry(world);
+            ADD_FAILURE() << "accepted diffuse " << diffuse << ", specular " << specular;
+        } catch (const Error& error) {
+            const std::string what = error.what();
+            EXPECT_NE(what.find("polished floor"), std::string::npos) << what;
+            EXPECT_NE(what.find("channel 1"), std::string::npos) << what;
+        }
+    }
+    Registry world; // at the limit: accepted
+    Material m;
+    m.baseColor = glm::vec3(0.4f);
+    m.specular = glm::vec3(0.6f);
+    addQuad(world, {-1, 0, 1}, {2, 0, 0}, {0, 0, -2}, m);
+    EXPECT_NO_THROW(VlfScene::fromRegistry(world));
 }
 
 TEST(VlfSystem, EmptySceneIsAClearError) {
