@@ -20,7 +20,6 @@ namespace qgi::vlf {
 namespace {
 
 constexpr float kInvPi = 0.31830988618f;
-constexpr std::size_t kMaxCrossings = 256;
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) {
@@ -40,7 +39,7 @@ std::uint32_t seedFor(std::uint64_t seed, std::uint64_t a, std::uint64_t b) {
 struct ChunkAccum {
     std::vector<glm::vec3> irradiance; // W/m^2 received
     VlfIterationStats stats;
-    std::size_t lines = 0, crossings = 0;
+    std::size_t lines = 0, crossings = 0, truncated = 0;
 };
 
 class Baker {
@@ -78,6 +77,10 @@ public:
             local.iterations.push_back(it);
         }
         local.seconds = since(t0);
+        if (local.truncatedLines > 0)
+            logWarning("VLF bake: ", local.truncatedLines, " of ", local.lines,
+                       " lines crossed the scene's faces more than ", kMaxLineCrossings,
+                       " times; light beyond those crossings is missing from the field");
         if (stats) *stats = local;
         return std::move(mVlf);
     }
@@ -318,7 +321,7 @@ private:
         const float h = mVlf.cellWidth();
         const float R = mVlf.radius();
         const int samples = std::max(1, mSettings.jitterSamples);
-        std::array<Crossing, kMaxCrossings> cross;
+        std::array<Crossing, kMaxLineCrossings + 1> cross; // one more: a line's cut shows
         const glm::vec3 env = iteration == 1 ? mScene.environment() : glm::vec3(0.f);
         const std::vector<Face>& faces = mVlf.faces();
         for (int sample = 0; sample < samples; ++sample) {
@@ -344,8 +347,12 @@ private:
                     }
                     const float u = -1.f + (float(i) + ju) * h, v = -1.f + (float(j) + jv) * h;
                     const glm::vec3 origin = mVlf.center() + R * (u * F.u + v * F.v - 1.01f * F.n);
-                    const std::size_t n = mScene.crossings(origin, d, 2.02f * R, cross.data(),
-                                                           kMaxCrossings, 1e-5f * R);
+                    std::size_t n = mScene.crossings(origin, d, 2.02f * R, cross.data(),
+                                                     cross.size(), 1e-5f * R);
+                    // Crossings beyond the kept ones were dropped: the last kept one is no end.
+                    const bool truncated = n > kMaxLineCrossings;
+                    n = std::min(n, kMaxLineCrossings);
+                    acc.truncated += truncated;
                     ++acc.lines;
                     acc.crossings += n;
                     if (n == 0) continue;
@@ -363,7 +370,7 @@ private:
                             sendRadiance(cross[0].face, point(0), psf, -orient, iteration);
                         acc.stats.escaped += glm::dvec3(L * lineFlux);
                     }
-                    if (facing(n - 1) > 0.f) {
+                    if (facing(n - 1) > 0.f && !truncated) {
                         if (env != glm::vec3(0.f)) {
                             acc.stats.fromEnvironment += glm::dvec3(env * lineFlux);
                             receive(acc, cross[n - 1].face, point(n - 1), psf, -orient, env,
@@ -427,6 +434,7 @@ private:
             stats.lostDeposits += acc.stats.lostDeposits;
             bake.lines += acc.lines;
             bake.crossings += acc.crossings;
+            bake.truncatedLines += acc.truncated;
         }
         for (std::size_t fi = 0; fi < mVlf.faces().size(); ++fi) {
             const FaceMap& m = mVlf.faceMaps()[fi];

@@ -31,7 +31,13 @@ struct VlfBakeStats {
     double seconds = 0.0;       ///< the whole bake, allocation included
     std::size_t lines = 0;      ///< lines traced over all iterations
     std::size_t crossings = 0;  ///< crossings found on them
+    /// Lines with more crossings than the bake keeps (kMaxLineCrossings): their crossings
+    /// beyond it are dropped, and their far end exchanges nothing.
+    std::size_t truncatedLines = 0;
 };
+
+/// Most crossings of one line the bake keeps, in depth order.
+inline constexpr std::size_t kMaxLineCrossings = 256;
 
 /** The bake of seed 002 (chapter 4-5; digest section 2), on the CPU with oneTBB.
  *
@@ -41,8 +47,8 @@ struct VlfBakeStats {
  *  ways (the thesis's exchange lists, section 4.3.2, in O(crossings) per line). Back faces
  *  block. A line's first crossing facing against it receives the environment.
  *
- *  Order: a direct-light pass for point and spot lights (shadow rays to texel centres and to
- *  glossy cells), then `iterations` passes. Each pass, for every subfield (in parallel), for
+ *  Order: a direct-light pass for point, spot and directional lights (shadow rays to texel centres
+ * and to glossy cells), then `iterations` passes. Each pass, for every subfield (in parallel), for
  *  each jittered direction in its cell: senders emit emission (first pass) + k_d / pi x unshot
  *  irradiance + unshot specular tile radiance; receivers deposit flux L * A_line * dOmega into
  *  their irradiance map and, for specular faces, record the incident radiance in their tiles.

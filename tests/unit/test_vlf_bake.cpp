@@ -630,6 +630,32 @@ TEST(VlfBake, SpotAndDirectionalLightsDirectPass) {
     EXPECT_GT(sunlit, 10);
 }
 
+TEST(VlfBake, LinesThroughMoreCrossingsThanKeptAreCountedAndCutShort) {
+    // A stack of thin horizontal sheets: lines near the vertical cross every one of them.
+    const auto stack = [](int sheets) {
+        test::VlfSceneBuilder b;
+        const std::uint32_t grey = b.material(glm::vec3(0.5f), glm::vec3(0.1f));
+        for (int k = 0; k < sheets; ++k) {
+            const float y = 0.002f * float(k);
+            b.quad({-1.f, y, -1.f}, {-1.f, y, 1.f}, {1.f, y, 1.f}, {1.f, y, -1.f}, grey);
+        }
+        return b.build();
+    };
+    VlfSettings s;
+    s.directionLevel = 1;
+    s.linesPerSide = 8;
+    s.tileSize = 4;
+    s.iterations = 1;
+    VlfBakeStats fits, cut;
+    bakeVlf(*stack(int(kMaxLineCrossings)), s, &fits); // as many as kept: none cut
+    EXPECT_EQ(fits.truncatedLines, 0u);
+    bakeVlf(*stack(int(kMaxLineCrossings) + 44), s, &cut);
+    EXPECT_GT(cut.truncatedLines, 0u);
+    EXPECT_LT(cut.truncatedLines, cut.lines); // lines that miss the sheets or graze few
+    // A cut line's last kept crossing is not taken for its end: it sends nothing out.
+    EXPECT_LT(cut.iterations[0].escaped.x, fits.iterations[0].escaped.x);
+}
+
 TEST(VlfBake, NonPlanarQuadsReadPiLeThroughTheFaceThatHoldsThePoint) {
     // A closed room whose far corner is pushed 4 cm out along the diagonal: the three walls
     // that meet there are non-planar quads, each baked as two triangle faces whose planes
