@@ -166,36 +166,52 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
     b.quad({-0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, 0.2f}, {-0.2f, 1.99f, 0.2f},
            lamp);
     const auto scene = b.build();
-    VlfSettings s;
-    s.directionLevel = 2;
-    s.linesPerSide = 48;
-    s.tileSize = 8;
-    s.iterations = 3;
-    s.jitterSamples = 1;
-    s.filterSigma = 0.f;
-    VlfBakeStats stats;
-    bakeVlf(*scene, s, &stats);
-    ASSERT_EQ(stats.iterations.size(), 3u);
-    for (const VlfIterationStats& it : stats.iterations) {
-        for (int c = 0; c < 3; ++c) {
-            ASSERT_GT(it.sent[c], 0.0);
-            // The lamp floats 1 cm below the ceiling: its back faces the ceiling and blocks,
-            // so nothing escapes and nothing is lost in the closed room.
-            EXPECT_EQ(it.escaped[c], 0.0);
-            // Every line's flux leaves one face and arrives at another (double sums of the
-            // same float terms: 1e-9 relative).
-            EXPECT_NEAR(it.received[c], it.sent[c], 1e-9 * it.sent[c]);
-            // The irradiance maps hold what arrived: float accumulation of at most ~1e4
-            // deposits per texel bounds the difference by 1e4 * 2^-24 relative.
-            EXPECT_NEAR(it.deposited[c], it.received[c], 1e4 * 0x1p-24 * it.received[c]);
+    // Independent seeds: each pass's sent flux is an unbiased estimate of what the previous
+    // pass left on the diffuse walls to reflect, k_d x the flux deposited in its texels (the
+    // exact integral of the piecewise-constant maps the senders read; no filter).
+    constexpr int kSeeds = 12;
+    constexpr double kT11 = 4.437; // Student t, 11 degrees of freedom, two-sided 1e-3
+    std::vector<double> ratio[2][3];
+    for (int seed = 1; seed <= kSeeds; ++seed) {
+        VlfSettings s;
+        s.directionLevel = 3;
+        s.linesPerSide = 48;
+        s.tileSize = 8;
+        s.iterations = 3;
+        s.jitterSamples = 1;
+        s.filterSigma = 0.f;
+        s.seed = std::uint64_t(seed);
+        VlfBakeStats stats;
+        bakeVlf(*scene, s, &stats);
+        ASSERT_EQ(stats.iterations.size(), 3u);
+        for (const VlfIterationStats& it : stats.iterations) {
+            for (int c = 0; c < 3; ++c) {
+                ASSERT_GT(it.sent[c], 0.0);
+                // The lamp floats 1 cm below the ceiling: its back faces the ceiling and
+                // blocks, so in the closed room nothing escapes but through the known leak
+                // where a line grazes a shared edge (ARCHITECTURE.md, VLF: about 1e-5 of the
+                // flux sent).
+                EXPECT_LT(it.escaped[c], 1e-4 * it.sent[c]);
+                // Bookkeeping: every exchange's flux is received where it was sent (the same
+                // positive terms, each rounded in float in its own order: 3 ulp at most) ...
+                EXPECT_NEAR(it.received[c], it.sent[c], 3 * 0x1p-24 * it.sent[c]);
+                // ... and the irradiance maps hold what arrived: float accumulation of at
+                // most ~1e4 deposits per texel bounds the difference by 1e4 * 2^-24 relative.
+                EXPECT_NEAR(it.deposited[c], it.received[c], 1e4 * 0x1p-24 * it.received[c]);
+            }
+            EXPECT_EQ(it.lostDeposits, 0u);
         }
-        EXPECT_EQ(it.lostDeposits, 0u);
+        for (int k = 0; k < 2; ++k)
+            for (int c = 0; c < 3; ++c)
+                ratio[k][c].push_back(stats.iterations[k + 1].sent[c] /
+                                      stats.iterations[k].reflectedDiffuse[c]);
     }
-    // Each pass shoots what the previous one reflected: a pass's sent flux estimates the
-    // previous pass's reflected flux (unbiased under jitter), and it shrinks by the albedo.
-    for (std::size_t k = 1; k < stats.iterations.size(); ++k)
-        for (int c = 0; c < 3; ++c)
-            EXPECT_LT(stats.iterations[k].sent[c], stats.iterations[k - 1].sent[c]);
+    for (int k = 0; k < 2; ++k)
+        for (int c = 0; c < 3; ++c) {
+            const auto [mean, se] = sampleMean(ratio[k][c]);
+            EXPECT_NEAR(mean, 1.0, kT11 * se) << "pass " << k + 2 << " channel " << c;
+            EXPECT_LT(kT11 * se, 0.05) << "precise enough to tell a 5 % loss";
+        }
 }
 
 TEST(VlfBake, WhiteFurnaceGivesTheGeometricSeries) {
