@@ -595,5 +595,31 @@ TEST(DemoSmoke, ThePointCacheIsBakedOnceThenLoadedAndShadesTheTaggedFloor) {
     EXPECT_FALSE(first.rgba == points.rgba);
 }
 
+TEST(DemoSmoke, TheVlfIsBakedCachedAndDrawsTheGlossyCornellBox) {
+    const fs::path dir = scratchDir() / "vlf";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string common = "--scene cornell-glossy --headless --frames 2 --width 48 "
+                               "--height 48 --photons 2000 --vlf-level 2 --vlf-lines 16 ";
+    const auto shot = [&](const std::string& name, const std::string& options) {
+        const RunResult run = runDemo(common + options + " --screenshot " + (dir / name).string());
+        EXPECT_EQ(run.exitCode, 0) << options << run.output;
+        return std::pair{run.output, readExr((dir / name).string() + ".exr")};
+    };
+    const std::string cache = " --vlf-cache " + (dir / "glossy.vlf").string();
+    // auto: the scene's glossy floor and mirror block turn it on.
+    const auto [baked, first] = shot("baked", "--vlf auto" + cache);
+    EXPECT_NE(baked.find("VLF: baked 12 faces"), std::string::npos) << baked;
+    EXPECT_NE(baked.find("VLF: saved"), std::string::npos) << baked;
+    const auto [loaded, again] = shot("loaded", "--vlf auto" + cache);
+    EXPECT_NE(loaded.find("VLF: loaded"), std::string::npos) << loaded;
+    EXPECT_EQ(loaded.find("VLF: baked"), std::string::npos) << loaded;
+    EXPECT_TRUE(first.rgba == again.rgba) << "the loaded field draws differently";
+    // Off: no field, and the reflections are gone from the image.
+    const auto [off, plain] = shot("off", "--vlf off");
+    EXPECT_EQ(off.find("VLF"), std::string::npos) << off;
+    EXPECT_FALSE(first.rgba == plain.rgba);
+}
+
 } // namespace
 } // namespace qgi
