@@ -291,38 +291,52 @@ TEST(VlfBake, DiffuseErrorFallsAsDirectionsGrow) {
     const auto scene = es.build();
     const int floor = test::findFace(*scene, {0.f, 1.f, 0.f}, {0.f, 0.f, 0.f});
     ASSERT_GE(floor, 0);
-    // One jittered direction per subfield: the error is Monte Carlo over 2 4^L + 1 directions
-    // and falls at least like 1 / sqrt(directions), 2x per level (faster once the fixed
-    // directions' structured bias, which falls faster, dominates).
-    double previous = 1e30, first = 0.0;
+    // One jittered direction per subfield, jittered lines: each texel's irradiance is an
+    // unbiased Monte Carlo estimate of its exact mean over 2 4^L + 1 directions, so the mean
+    // squared error over the floor's texels falls like 1 / directions (4x per level; faster
+    // where the fixed directions' structured error, which falls faster, dominates). Over
+    // kSeeds independent bakes per level, the mean squared errors and their standard errors.
+    constexpr int kSeeds = 8;
+    constexpr double kT = 4.0; // one-sided, against Student t with 7 (or more) dof: < 3e-3
+    SampleMean mse[5];
     for (int level = 1; level <= 4; ++level) {
-        VlfSettings s;
-        s.directionLevel = level;
-        s.linesPerSide = 64;
-        s.tileSize = 8;
-        s.iterations = 1;
-        s.jitterSamples = 1;
-        s.texelCells = 2.f;
-        s.filterSigma = 0.f;
-        const Vlf v = bakeVlf(*scene, s);
-        const FaceMap& m = v.faceMaps()[std::size_t(floor)];
-        double err2 = 0;
-        int n = 0;
-        for (std::uint32_t ty = 0; ty < m.height; ty += 2)
-            for (std::uint32_t tx = 0; tx < m.width; tx += 2) {
-                const double truth = es.texelMean(v, std::uint32_t(floor), tx, ty);
-                const double e = v.irradiance()[m.firstTexel + ty * m.width + tx].x - truth;
-                err2 += e * e;
-                ++n;
-            }
-        const double rms = std::sqrt(err2 / n);
-        EXPECT_LT(rms, previous) << "level " << level;
-        if (level == 1) first = rms;
-        previous = rms;
+        std::vector<double> values;
+        for (int seed = 1; seed <= kSeeds; ++seed) {
+            VlfSettings s;
+            s.directionLevel = level;
+            s.linesPerSide = 64;
+            s.tileSize = 8;
+            s.iterations = 1;
+            s.jitterSamples = 1;
+            s.texelCells = 2.f;
+            s.filterSigma = 0.f;
+            s.seed = std::uint64_t(seed);
+            const Vlf v = bakeVlf(*scene, s);
+            const FaceMap& m = v.faceMaps()[std::size_t(floor)];
+            double err2 = 0;
+            int n = 0;
+            for (std::uint32_t ty = 0; ty < m.height; ty += 2)
+                for (std::uint32_t tx = 0; tx < m.width; tx += 2) {
+                    const double truth = es.texelMean(v, std::uint32_t(floor), tx, ty);
+                    const double e = v.irradiance()[m.firstTexel + ty * m.width + tx].x - truth;
+                    err2 += e * e;
+                    ++n;
+                }
+            values.push_back(err2 / n);
+        }
+        mse[level] = sampleMean(values);
     }
-    // From 9 to 513 directions: at least three quarters of the sqrt(57) = 7.5 the rate gives
-    // (a quarter spared for the spread of an estimate from only 9 directions).
-    EXPECT_GT(first / previous, 0.75 * std::sqrt(513.0 / 9.0));
+    const auto atLeastAsFast = [&](int coarse, int fine) {
+        // mse[fine] x (directions ratio) <= mse[coarse], within kT combined standard errors.
+        const double ratio = (2.0 * std::pow(4.0, fine) + 1) / (2.0 * std::pow(4.0, coarse) + 1);
+        const double lhs = ratio * mse[fine].mean, rhs = mse[coarse].mean;
+        const double se = std::hypot(ratio * mse[fine].standardError, mse[coarse].standardError);
+        EXPECT_LE(lhs, rhs + kT * se) << "levels " << coarse << " -> " << fine;
+        EXPECT_LT(se, 0.5 * rhs) << "precise enough to tell the rate";
+    };
+    for (int level = 1; level < 4; ++level)
+        atLeastAsFast(level, level + 1);
+    atLeastAsFast(1, 4); // 9 -> 513 directions: 57x
 }
 
 TEST(VlfBake, MirrorReturnsKsTimesWhatItReflects) {
