@@ -28,8 +28,9 @@ struct ShProbeSettings {
     /// Probes within this distance of a change (a delta segment's end point, the old or new
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.
     float influenceDistance = 0.f;
-    /// A half-spacing cell of the lattice needs at least this many end points of this frame's
-    /// PhotonDelta segments before it marks probes: the scattered later bounces of re-traced
+    /// A half-spacing cell of the lattice needs this many end points of PhotonDelta segments
+    /// (counted over frames until it marks, then from zero again) before it marks probes: the
+    /// scattered later bounces of re-traced
     /// paths change per-vertex irradiance by a photon or two here and there, far below the
     /// estimate's own noise (DETP's default disc holds about 64 photons), and would otherwise
     /// keep the whole volume stale while anything moves.

@@ -104,6 +104,7 @@ void ShProbeSystem::build(Registry& registry) {
     mStale.assign(mVolume->probeCount(), 0);
     mStaleCount = 0;
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
+    mFineTouched.clear(); // end points counted from the next delta on
     mMobiles.clear();
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const MobileMesh&, const Mesh& mesh, const WorldTransform& world) {
@@ -495,14 +496,17 @@ void ShProbeSystem::markChanges(const Registry& registry) {
 
     // The delta's end points: where per-vertex irradiance can have changed. They are counted
     // on a lattice of half the probe spacing first (a moving mobile re-traces thousands of
-    // paths whose ends crowd into a few places); each half-cell with at least
-    // minDeltaEndPoints of them marks the probes within the influence distance of its
-    // centre, widened by its half diagonal so no end point's neighbourhood is missed.
+    // paths whose ends crowd into a few places); each half-cell whose count reaches
+    // minDeltaEndPoints marks the probes within the influence distance of its centre, widened
+    // by its half diagonal so no end point's neighbourhood is missed, and starts counting
+    // again. Counts carry over from frame to frame, so changes that trickle in a few end
+    // points a frame still mark their probes once they add up.
     if (delta && !delta->paths.empty()) {
         const float fine = 0.5f * grid.spacing;
         const glm::ivec3 fineCounts = 2 * grid.counts + 1;
         const glm::vec3 fineOrigin = grid.origin - 0.5f * fine;
-        mFineTouched.assign(std::size_t(fineCounts.x) * fineCounts.y * fineCounts.z, 0);
+        const std::size_t fineCells = std::size_t(fineCounts.x) * fineCounts.y * fineCounts.z;
+        if (mFineTouched.size() != fineCells) mFineTouched.assign(fineCells, 0);
         const glm::vec3 hiBound = glm::vec3(fineCounts - 1);
         const auto touch = [&](const PhotonSegments& s) {
             for (std::size_t i = 0; i < s.size(); ++i) {
@@ -523,12 +527,15 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         const float radius = mInfluence + 0.5f * std::sqrt(3.f) * fine;
         for (int z = 0; z < fineCounts.z; ++z)
             for (int y = 0; y < fineCounts.y; ++y)
-                for (int x = 0; x < fineCounts.x; ++x)
-                    if (mFineTouched[std::size_t(x) +
+                for (int x = 0; x < fineCounts.x; ++x) {
+                    std::uint16_t& count =
+                        mFineTouched[std::size_t(x) +
                                      fineCounts.x *
-                                         (std::size_t(y) + fineCounts.y * std::size_t(z))] >=
-                        mSettings.minDeltaEndPoints)
-                        markNear(fineOrigin + fine * (glm::vec3(x, y, z) + 0.5f), radius);
+                                         (std::size_t(y) + fineCounts.y * std::size_t(z))];
+                    if (count < mSettings.minDeltaEndPoints) continue;
+                    markNear(fineOrigin + fine * (glm::vec3(x, y, z) + 0.5f), radius);
+                    count = 0;
+                }
     }
 }
 

@@ -45,8 +45,9 @@ class RayScene;
  *  Following the scene (update()): the first update projects every probe. Later frames mark
  *  probes stale
  *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments,
- *     old and new, the only places where per-vertex irradiance can have changed, wherever at
- *     least minDeltaEndPoints of them fall in one half-spacing cell;
+ *     old and new, the only places where per-vertex irradiance can have changed, wherever
+ *     minDeltaEndPoints of them have fallen in one half-spacing cell (over this and earlier
+ *     frames, since the cell last marked);
  *   - near a moved mobile's old or new world bounds (or its bounds, when it was taken out or
  *     put back: MobileMesh::active): within influenceDistance, or as far as
  *     its bounding sphere covers mobileSolidAngleShare of a probe's sphere of directions
@@ -178,6 +179,7 @@ private:
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::uint32_t> mDistance;
     std::vector<std::uint32_t> mQueue;
+    /// Delta end points counted per half-spacing cell since the cell last marked its probes.
     std::vector<std::uint16_t> mFineTouched;
     std::vector<std::uint32_t> mPendingCells;
     std::vector<std::uint8_t> mCellQueued;

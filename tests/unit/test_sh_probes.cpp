@@ -1057,6 +1057,14 @@ TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
         crowd.newSegments.appendFrom(delta.newSegments, 1);
     quiet.system.update(quiet.world, FrameContext{2});
     EXPECT_EQ(quiet.system.staleCount(), marked);
+
+    // Counts add up over frames: the lone end point, frame after frame, marks on the fourth.
+    MobileRoom trickle(0, 4);
+    trickle.world.ctx().emplace<PhotonDelta>(delta);
+    for (std::uint64_t frame = 1; frame <= 4; ++frame) {
+        trickle.system.update(trickle.world, FrameContext{frame});
+        EXPECT_EQ(trickle.system.staleCount(), frame < 4 ? 0u : marked) << "frame " << frame;
+    }
 }
 
 TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
