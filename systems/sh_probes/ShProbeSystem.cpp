@@ -669,20 +669,31 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
             const glm::vec3 p(world.matrix[3]);
             if (glm::any(glm::lessThan(p, low)) || glm::any(glm::greaterThan(p, high))) {
                 ++mStats.outside;
-                if (std::find(mWarnedOutside.begin(), mWarnedOutside.end(), e) ==
-                    mWarnedOutside.end()) {
-                    mWarnedOutside.push_back(e);
+                if (mWarnedOutside.insert(e).second) {
                     logWarning("SH probes: avatar ", entityName(registry, e),
                                " is outside the probe volume; it takes the light of the nearest "
                                "probes");
                 }
             }
             ProbeBlend blend;
-            if (!isFinite(p) || !volume.interpolate(p, lighting.coefficients, &blend)) {
+            sh::ShRgb blended;
+            if (!isFinite(p) || !volume.interpolate(p, blended, &blend)) {
                 ++mStats.unlit; // left as it was
                 return;
             }
-            mStats.fallbacks += blend.fallback;
+            if (blend.fallback) {
+                // Every probe around it is behind a wall (a closet narrower than the probe
+                // spacing): blending them anyway would light it through the walls. It keeps
+                // the light it had.
+                ++mStats.fallbacks;
+                if (mWarnedHidden.insert(e).second)
+                    logWarning("SH probes: avatar ", entityName(registry, e),
+                               " stands where every probe around it is behind a wall (a space "
+                               "narrower than the ",
+                               grid.spacing, " m probe spacing); it keeps its last lighting there");
+                return;
+            }
+            lighting.coefficients = blended;
             ++mStats.avatars;
         });
 }

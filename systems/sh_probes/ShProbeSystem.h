@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <span>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 namespace qgi {
@@ -62,7 +63,9 @@ class RayScene;
  *  Avatars (every frame): the radiance SH at the avatar's origin (WorldTransform translation)
  *  from ProbeVolume::interpolate: trilinear weights, zero for disabled probes and for probes
  *  hidden from the avatar by geometry (per-cell visibility lattice, computed on the first
- *  visit of a cell, spacing / visibilitySubdivisions apart), written to ShLighting.
+ *  visit of a cell, spacing / visibilitySubdivisions apart), written to ShLighting. An avatar
+ *  whose probes are all disabled or all hidden (a closet narrower than the spacing) keeps the
+ *  ShLighting it had: blending hidden probes would light it through the walls.
  *
  *  Reads:  const Avatar, const WorldTransform (and its change list), const Mesh,
  *          const Material (and its change list), const MobileMesh (and its change list),
@@ -82,7 +85,7 @@ public:
         std::size_t staleAfter = 0;      ///< stale probes left for later frames
         std::size_t visibilityCells = 0; ///< cell visibility masks computed this frame
         std::size_t avatars = 0;         ///< avatars written
-        std::size_t fallbacks = 0;       ///< avatars whose visible corners were all hidden
+        std::size_t fallbacks = 0; ///< avatars whose corners were all hidden: kept their light
         std::size_t unlit = 0;           ///< avatars among 8 disabled probes (left as they were)
         std::size_t outside = 0;         ///< avatars over a probe spacing outside the volume
     };
@@ -184,7 +187,8 @@ private:
     std::vector<std::uint32_t> mPendingCells;
     std::vector<std::uint8_t> mCellQueued;
     std::vector<Entity> mAvatarEntities;
-    std::vector<Entity> mWarnedOutside; ///< avatars named for leaving the probe volume
+    std::unordered_set<Entity> mWarnedOutside; ///< avatars named for leaving the probe volume
+    std::unordered_set<Entity> mWarnedHidden;  ///< avatars named for standing among hidden probes
     bool mWarnedNonFinite = false;      ///< non-finite vertex irradiance reported once
 };
 

@@ -690,6 +690,60 @@ TEST(ShProbes, AvatarInTheDarkRoomStaysDark) {
     EXPECT_GT(litCorners, 0.0);
 }
 
+TEST(ShProbes, AnAvatarInAClosetNarrowerThanACellKeepsItsLightInsteadOfLeakingIt) {
+    // A closed 0.4 m box in the lit room, centred in a probe cell of 0.5 m: no probe inside,
+    // every corner probe behind its walls for an avatar at its centre. Blending the lit
+    // corners anyway would light the avatar through the walls.
+    Registry world;
+    addMesh(world, boxMesh({2.f, 1.f, 1.f}, true), translation({0.f, 1.f, 0.f}), grey(0.7f), false,
+            "rooms");
+    addPointLight(world, {-1.f, 1.f, 0.f}, 10.f);
+    addSceneInfo(world, {-2.f, 0.f, -1.f}, {2.f, 2.f, 1.f});
+    ShProbeSettings settings = TwoRooms::settings();
+    const ProbeGrid grid = ProbeGrid::over(Aabb{{-2.f, 0.f, -1.f}, {2.f, 2.f, 1.f}}, 0.5f);
+    glm::ivec3 cell;
+    glm::vec3 t;
+    grid.locate({-1.4f, 0.8f, -0.4f}, cell, t);
+    const glm::vec3 centre = grid.position(grid.cornerProbe(cell, 0)) + 0.25f;
+    addMesh(world, boxMesh(glm::vec3(0.2f)), translation(centre), grey(0.7f), false, "closet");
+    test::buildRayScene(world);
+    ShProbeSystem system(settings);
+    system.build(world);
+    ASSERT_EQ(world.ctx().get<ProbeVolume>().grid().position(grid.cornerProbe(cell, 0)),
+              grid.position(grid.cornerProbe(cell, 0))); // the same lattice
+    system.update(world, FrameContext{});
+
+    // Walked in from outside: lit there, then it keeps that light, named once.
+    const Entity walker = addAvatar(world, centre + glm::vec3(0.f, 0.f, 0.5f));
+    world.emplace<Name>(walker, "hider");
+    system.update(world, FrameContext{1});
+    ASSERT_GT(world.get<ShLighting>(walker).coefficients[0].x, 0.f);
+    const sh::ShRgb outside = world.get<ShLighting>(walker).coefficients;
+    world.patch<WorldTransform>(walker).matrix = translation(centre);
+    ::testing::internal::CaptureStderr();
+    system.update(world, FrameContext{2});
+    system.update(world, FrameContext{3});
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(system.lastFrame().fallbacks, 1u);
+    EXPECT_TRUE(sameSh(world.get<ShLighting>(walker).coefficients, outside));
+    const std::string named = "avatar 'hider' stands where every probe around it is behind a wall";
+    EXPECT_NE(log.find(named), std::string::npos) << log;
+    EXPECT_EQ(log.find(named), log.rfind(named)) << log;
+    // One that starts there has had no light to keep: dark, as the closet is.
+    const Entity born = addAvatar(world, centre + glm::vec3(0.02f));
+    system.update(world, FrameContext{4});
+    EXPECT_EQ(shNorm(world.get<ShLighting>(born).coefficients), 0.0);
+
+    // Not vacuous: the corner probes are lit and enabled, so a blend would have lit it.
+    const ProbeVolume& volume = world.ctx().get<ProbeVolume>();
+    double litCorners = 0.0;
+    for (int c = 0; c < 8; ++c) {
+        EXPECT_TRUE(volume.enabled(volume.grid().cornerProbe(cell, c)));
+        litCorners += shNorm(volume.coefficients(volume.grid().cornerProbe(cell, c)));
+    }
+    EXPECT_GT(litCorners, 0.0);
+}
+
 TEST(ShProbes, AnAvatarOutsideTheVolumeIsNamedOnce) {
     TwoRooms rooms;
     const ProbeGrid& grid = rooms.world.ctx().get<ProbeVolume>().grid();
