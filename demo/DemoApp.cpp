@@ -83,7 +83,8 @@ Entity addDefaultCamera(Registry& registry) {
 
 /// A scene with nothing to light is an error; one with nothing that emits, a warning.
 void checkLitScene(const Registry& registry) {
-    const std::string& name = registry.ctx().get<SceneInfo>().name;
+    const SceneInfo& info = registry.ctx().get<SceneInfo>();
+    const std::string name = info.source.starts_with("builtin:") ? info.name : info.source;
     std::size_t triangles = 0;
     bool emissive = false;
     registry.view<const Mesh>().each([&](Entity e, const Mesh& mesh) {
@@ -92,7 +93,9 @@ void checkLitScene(const Registry& registry) {
         emissive |= m && m->emission != glm::vec3(0.f);
     });
     if (triangles == 0)
-        fail("scene '", name, "' has no triangles to light (its meshes are empty or degenerate)");
+        fail("scene '", name,
+             "' has no triangles to light (its meshes are empty or have no area; points and "
+             "lines are skipped)");
     const bool lights = !registry.view<const PointLight>().entities().empty() ||
                         !registry.view<const SpotLight>().entities().empty() ||
                         !registry.view<const DirectionalLight>().entities().empty();

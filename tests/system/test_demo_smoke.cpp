@@ -283,7 +283,33 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
                              "--exposure inf", "--vlf-lines 12", "--context sideways"}) {
         const RunResult run = runDemo(std::string(args) + " --headless");
         EXPECT_EQ(run.exitCode, 2) << args << ": " << run.output;
-        EXPECT_NE(run.output.find("error"), std::string::npos) << args;
+        // One line, naming the option.
+        const std::string option = std::string(args).substr(0, std::string(args).find(' '));
+        EXPECT_TRUE(run.output.starts_with("qgi-demo: error: ")) << args << ": " << run.output;
+        EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+        EXPECT_NE(run.output.find(option), std::string::npos) << args << ": " << run.output;
+    }
+}
+
+TEST(DemoSmoke, AFileWithNothingToLightIsNamed) {
+    // Lines only (skipped with a warning), and one triangle with no area.
+    const fs::path dir = scratchDir();
+    const fs::path flat = dir / "zero_area.gltf";
+    std::ofstream(flat) << R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [2, 0, 0]}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "buffers": [{"byteLength": 36, "uri":
+            "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAQAAAAAAAAAAA"}]})";
+    for (const fs::path& scene :
+         {fs::path(QGI_TEST_DATA_DIR) / "gltf" / "unusual" / "lines_only.gltf", flat}) {
+        const RunResult run =
+            runDemo("--headless --frames 1 --width 16 --height 16 --scene " + scene.string());
+        EXPECT_EQ(run.exitCode, 1) << run.output;
+        EXPECT_NE(run.output.find(scene.string() + "' has no triangles to light"),
+                  std::string::npos)
+            << run.output;
     }
 }
 
