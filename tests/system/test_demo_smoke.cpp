@@ -510,11 +510,24 @@ TEST(DemoSmoke, CameraPathsAreReadStrictly) {
         std::ofstream(dir / name) << text;
         return runDemo("--scene cornell --headless --frames 2 --width 16 --height 16 --photons 0 "
                        "--vlf off --quiet --camera-path " +
-                       (dir / name).string());
+                       (dir / name).string() + " --screenshot " + (dir / name).string());
     };
     EXPECT_EQ(run("good.csv", "time,x,y,z,yaw_deg,pitch_deg\n0,0,0.3,1,0,0\n1,0.1,0.3,1,10,-5\n")
                   .exitCode,
               0);
+    // The camera follows it: turned 40 degrees, or on the scene's own camera (none), it sees
+    // another picture.
+    EXPECT_EQ(run("turned.csv", "0,0,0.3,1,40,0\n1,0.1,0.3,1,50,-5\n").exitCode, 0);
+    ASSERT_EQ(runDemo("--scene cornell --headless --frames 2 --width 16 --height 16 --photons 0 "
+                      "--vlf off --quiet --camera-path none --screenshot " +
+                      (dir / "scene").string())
+                  .exitCode,
+              0);
+    const ImageF good = readExr((dir / "good.csv.exr").string()),
+                 turned = readExr((dir / "turned.csv.exr").string()),
+                 scene = readExr((dir / "scene.exr").string());
+    EXPECT_FALSE(good.rgba == turned.rgba);
+    EXPECT_FALSE(good.rgba == scene.rgba);
     for (const auto& [name, text, says] :
          {std::tuple{"garbage.csv", "hello world\n0,0,0.3,1,0,0\n", "expected six numbers"},
           std::tuple{"seven.csv", "0,0,0.3,1,0,0,7\n", "expected six numbers"},
