@@ -12,4 +12,8 @@ namespace qgi {
 /// unflipped. `srgb`: the texels are sRGB-encoded and read back linear in the shader.
 GlTexture createColorTexture(int width, int height, std::span<const std::uint8_t> rgba, bool srgb);
 
+/// Sets the pixel unpack state to tightly packed rows read from client memory, whatever the
+/// application left there, before a texture upload.
+void useTightUnpacking();
+
 } // namespace qgi

@@ -6,8 +6,9 @@ namespace qgi {
 
 /** Everything a pass depends on, set in full by applyState() at the start of every pass, so
  *  no pass inherits state from the one before it (or from an overlay drawn in between).
- *  Blending, stencil, scissor, sRGB conversion and face culling are always off in this
- *  renderer (both sides of thin, single-sided walls are drawn).                          */
+ *  Blending, stencil, scissor, sRGB conversion, face culling, logic ops, rasterizer discard
+ *  and primitive restart are always off in this renderer (both sides of thin, single-sided
+ *  walls are drawn); front faces wind counter-clockwise and clip depth runs from -1 to 1.  */
 struct PipelineState {
     GLuint framebuffer = 0; ///< 0: the window's framebuffer
     GLint viewportWidth = 0;

@@ -288,6 +288,7 @@ void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
     }
     mVlfAtlas = createTexture(GL_TEXTURE_2D);
     glTextureStorage2D(mVlfAtlas.id(), 1, GL_RGBA32F, width, rows * m);
+    useTightUnpacking();
     glTextureSubImage2D(mVlfAtlas.id(), 0, 0, 0, width, rows * m, GL_RGBA, GL_FLOAT, texels.data());
     glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);

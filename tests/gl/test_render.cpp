@@ -334,6 +334,68 @@ TEST_F(RenderTest, CornellBoxSpotAndDirectionalLightsMatchCpuReference) {
                            scene.range(settings(ShadingMode::Hybrid)));
 }
 
+TEST_F(RenderTest, NoPassInheritsTheGlStateItFinds) {
+    // A frame, then every piece of state a pass depends on set wrong (as a game's own UI or
+    // debug drawing might leave it), then the same frame again, its block's shadows redrawn:
+    // the images must be identical.
+    SceneBuilder scene(mWorld);
+    const Entity block = buildCornellBox(scene);
+    mWorld.emplace<MobileMesh>(block);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    scene.addDirectionalLight({-0.35f, -0.55f, -1.f}, {1.f, 0.95f, 0.85f}, 1.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer, 2);
+    const ImageF hdr = renderer.readHdr();
+    const Image8 ldr = renderer.readLdr();
+
+    GLuint foreign = 0, colour = 0;
+    glCreateFramebuffers(1, &foreign);
+    glCreateRenderbuffers(1, &colour);
+    glNamedRenderbufferStorage(colour, GL_RGBA8, 4, 4);
+    glNamedFramebufferRenderbuffer(foreign, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colour);
+    glBindFramebuffer(GL_FRAMEBUFFER, foreign);
+    glViewport(0, 0, 3, 3);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(0, 0, 1, 1);
+    glEnable(GL_STENCIL_TEST);
+    glStencilFunc(GL_NEVER, 0, 0xff);
+    glEnable(GL_BLEND);
+    glBlendFunc(GL_ONE, GL_ONE);
+    glDisable(GL_DEPTH_TEST);
+    glDepthMask(GL_FALSE);
+    glDepthFunc(GL_GREATER);
+    glEnable(GL_DEPTH_CLAMP);
+    glColorMask(GL_FALSE, GL_TRUE, GL_FALSE, GL_TRUE);
+    glEnable(GL_CULL_FACE);
+    glCullFace(GL_FRONT_AND_BACK);
+    glFrontFace(GL_CW);
+    glPolygonMode(GL_FRONT_AND_BACK, GL_LINE);
+    glEnable(GL_POLYGON_OFFSET_FILL);
+    glPolygonOffset(50.f, 50.f);
+    glEnable(GL_FRAMEBUFFER_SRGB);
+    glClipControl(GL_UPPER_LEFT, GL_ZERO_TO_ONE); // a reversed-Z engine's setting
+    glEnable(GL_RASTERIZER_DISCARD);
+    glEnable(GL_COLOR_LOGIC_OP);
+    glLogicOp(GL_XOR);
+    glEnable(GL_SAMPLE_ALPHA_TO_COVERAGE);
+    glEnable(GL_PRIMITIVE_RESTART);
+    glPrimitiveRestartIndex(0);
+    glPixelStorei(GL_PACK_ALIGNMENT, 8); // and the screenshots' read-back
+    glPixelStorei(GL_PACK_ROW_LENGTH, 7);
+    glClearColor(1.f, 0.f, 0.f, 1.f);
+    glClearDepth(0.0);
+    glUseProgram(0);
+    glBindVertexArray(0);
+    ASSERT_EQ(glGetError(), GLenum(GL_NO_ERROR));
+
+    mWorld.patch<WorldTransform>(block); // the same pose, marked moved: its shadows redrawn
+    renderFrames(renderer);
+    EXPECT_TRUE(renderer.readHdr().rgba == hdr.rgba) << "the HDR frame changed";
+    EXPECT_TRUE(renderer.readLdr().rgba == ldr.rgba) << "the displayed frame changed";
+    glDeleteFramebuffers(1, &foreign);
+    glDeleteRenderbuffers(1, &colour);
+}
+
 TEST_F(RenderTest, MovingMobileRefreshesOnlyItsShadows) {
     // The block is a mobile: it starts just above the light (shadowing the ceiling through the
     // +Y cube face only), then moves to the pose the reference has. The static depth is kept,
