@@ -66,7 +66,7 @@ glm::vec3 PunctualLight::intensityTowards(const glm::vec3& d) const {
     return intensity * spotFalloff(glm::dot(d, axis), cosInner, cosOuter);
 }
 
-std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
+std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, EmbreeDevice* device) {
     std::vector<Triangle> triangles;
     std::vector<std::uint32_t> group;
     std::vector<Material> materials;
@@ -138,15 +138,17 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry) {
     const SceneInfo* info = registry.ctx().find<SceneInfo>();
     auto scene =
         std::make_unique<VlfScene>(std::move(triangles), group, materials, std::move(lights),
-                                   info ? info->environment : glm::vec3(0.f));
+                                   info ? info->environment : glm::vec3(0.f), device);
     scene->mEntities = std::move(entities);
     return scene;
 }
 
 VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint32_t>& group,
                    const std::vector<Material>& materials, std::vector<PunctualLight> lights,
-                   const glm::vec3& environment)
-    : mLights(std::move(lights)), mEnvironment(environment) {
+                   const glm::vec3& environment, EmbreeDevice* device)
+    : mLights(std::move(lights)), mEnvironment(environment),
+      mOwnDevice(device ? nullptr : std::make_unique<EmbreeDevice>()),
+      mDevice(device ? device : mOwnDevice.get()) {
     if (group.size() != triangles.size()) fail("VlfScene: one group per triangle is needed");
     if (!finite(environment)) fail("VlfScene: the environment radiance is not finite");
     for (const PunctualLight& l : mLights)
@@ -222,7 +224,7 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
 }
 
 void VlfScene::buildEmbree() {
-    const RTCDevice device = mDevice.handle();
+    const RTCDevice device = mDevice->handle();
     GeometryHandle geometry(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE));
     auto* vertices = static_cast<glm::vec3*>(
         rtcSetNewGeometryBuffer(geometry.get(), RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,

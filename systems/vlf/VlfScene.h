@@ -77,8 +77,11 @@ public:
     /// DirectionalLight with a WorldTransform (LightStandIn lights are skipped: their surface
     /// emits already); the
     /// environment from SceneInfo when present. Mobiles and avatars are not part of the VLF.
-    /// Throws qgi::Error on an empty scene or non-finite data, naming the entity.
-    static std::unique_ptr<VlfScene> fromRegistry(const Registry& registry);
+    /// `device`: the Embree device to build on (the RayScene's, so the engine keeps one); null:
+    /// the scene makes its own. Throws qgi::Error on an empty scene or non-finite data, naming
+    /// the entity.
+    static std::unique_ptr<VlfScene> fromRegistry(const Registry& registry,
+                                                  EmbreeDevice* device = nullptr);
 
     /// Groups `triangles` (their `face` field is ignored) into planar faces by `group`
     /// (triangles of one group with one plane form a face) with `materials[group]`.
@@ -95,9 +98,10 @@ public:
     /// except that a metal of roughness kDiffuseRoughness or more stays diffuse (k_d =
     /// baseColor, no lobe).
     static Material fromComponent(const qgi::Material& material);
+    /// `device` as for fromRegistry(); it must outlive the scene.
     VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint32_t>& group,
              const std::vector<Material>& materials, std::vector<PunctualLight> lights,
-             const glm::vec3& environment);
+             const glm::vec3& environment, EmbreeDevice* device = nullptr);
 
     const std::vector<Face>& faces() const { return mFaces; }
     /// The group (fromRegistry: the index into entities()) of each face.
@@ -144,8 +148,9 @@ private:
     glm::vec3 mEnvironment{0.f};
     Aabb mBounds;
     std::uint64_t mHash = 0;
-    EmbreeDevice mDevice;
-    SceneHandle mScene;
+    std::unique_ptr<EmbreeDevice> mOwnDevice; ///< when no device was given
+    EmbreeDevice* mDevice = nullptr;
+    SceneHandle mScene; // released before the device it was made on
 };
 
 } // namespace qgi::vlf

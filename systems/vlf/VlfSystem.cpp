@@ -2,6 +2,7 @@
 
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/raytrace/RayScene.h"
 #include "systems/vlf/VlfBake.h"
 #include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfField.h"
@@ -14,7 +15,8 @@ VlfSystem::VlfSystem(const VlfSystemSettings& settings) : mSettings(settings) {
 }
 
 void VlfSystem::build(Registry& registry) {
-    const auto scene = vlf::VlfScene::fromRegistry(registry);
+    RayScene* rays = registry.ctx().find<RayScene>();
+    const auto scene = vlf::VlfScene::fromRegistry(registry, rays ? &rays->device() : nullptr);
     VlfSettings bake = mSettings.bake;
     bake.progress = true;
     bool baked = false;
