@@ -14,6 +14,7 @@
 #include "components/WorldTransform.h"
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
+#include "demo/Overlay.h"
 #include "runtime/core/Log.h"
 #include "runtime/io/CacheFile.h"
 #include "runtime/io/IrradianceExport.h"
@@ -29,6 +30,7 @@
 #include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfScene.h"
 
+#include <epoxy/gl.h>
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
@@ -46,6 +48,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -374,6 +377,21 @@ int runDemo(const DemoOptions& options) {
     FrameSchedule frame(world, frameSettings);
     FlyController controller(window.handle());
     if (frame.renderer()) frame.renderer()->setShowPointCache(options.showPoints);
+    // The overlay draws through GLFW: not in an EGL pbuffer.
+    std::unique_ptr<Overlay> overlay;
+    const bool overlayWanted =
+        options.overlay == "on" || (options.overlay == "auto" && !options.headless);
+    if (overlayWanted && window.handle())
+        overlay = std::make_unique<Overlay>(window.handle());
+    else if (options.overlay == "on")
+        logWarning("--overlay on: an EGL pbuffer has no window for it; drawn without");
+    OverlayInfo overlayInfo;
+    overlayInfo.scene = world.ctx().get<SceneInfo>().name;
+    overlayInfo.lighting =
+        options.photons > 0
+            ? str(options.mode, " mode, ", options.photons, " photons, ", options.estimator,
+                  options.fullRecompute ? ", full recompute" : "")
+            : str(options.mode, " mode, no photons");
     bool pointKeyWasDown = false;
     if (!options.headless)
         frame.schedule().add("input", "input", [&](Registry& r, const FrameContext& f) {
@@ -420,6 +438,15 @@ int runDemo(const DemoOptions& options) {
         const bool screenshot = options.screenshot && (lastFrame || f12) && frame.renderer();
         if (screenshot) frame.renderer()->requestScreenshot(*options.screenshot);
         frame.run(world, context);
+        if (overlay) {
+            const Entity selected = controller.selectedMobile();
+            overlayInfo.selected = selected ? entityName(world, selected) : "";
+            overlayInfo.lampsOff = controller.lampsOff();
+            overlayInfo.pointsShown = frame.renderer() && frame.renderer()->showPointCache();
+            glBindFramebuffer(GL_FRAMEBUFFER, 0);
+            overlay->draw(profiler, overlayInfo);
+            controller.setMouseTaken(overlay->wantsMouse());
+        }
         window.swapBuffers();
         // A headless run exists to write its outputs: one that could not be written fails it
         // (after the others were written, below).

@@ -198,6 +198,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         "out the direct light the renderer draws. An existing file that is not an earlier "
         "export is not overwritten");
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
+    app.add_option("--overlay", o.overlay,
+                   "Frame-time overlay (F1 hides it): auto (in an interactive window), on (in a "
+                   "headless window too; never in screenshots), off")
+        ->check(CLI::IsMember({"auto", "on", "off"}));
     app.add_flag("--point-cache", o.pointCache,
                  "Build the point cache (soft shadows of area lights and indirect light per "
                  "fragment on the surfaces tagged for it; hybrid mode)");

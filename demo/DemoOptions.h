@@ -41,6 +41,9 @@ struct DemoOptions {
     /// Its cache file; "auto": <scene>.pcache in the working folder, "none": build every start.
     std::string pointCacheFile = "auto";
     bool showPoints = false;       ///< start with the point-set view on (key P toggles it)
+    /// The ImGui overlay: "auto" in an interactive window, "on" in a headless one too (drawn into
+    /// the hidden window, never into screenshots), "off".
+    std::string overlay = "auto";
 };
 
 /// Parses argv. Returns the options, or an exit code when the program should stop now

@@ -118,7 +118,8 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
     // Mouse look while the right button is held.
     double x, y;
     glfwGetCursorPos(mWindow, &x, &y);
-    const bool looking = glfwGetMouseButton(mWindow, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS;
+    const bool looking =
+        !mMouseTaken && glfwGetMouseButton(mWindow, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS;
     const bool moving = pressed(mWindow, GLFW_KEY_W) || pressed(mWindow, GLFW_KEY_A) ||
                         pressed(mWindow, GLFW_KEY_S) || pressed(mWindow, GLFW_KEY_D) ||
                         pressed(mWindow, GLFW_KEY_Q) || pressed(mWindow, GLFW_KEY_E);

@@ -24,6 +24,11 @@ class FlyController {
 public:
     explicit FlyController(GLFWwindow* window) : mWindow(window) {}
     void update(Registry& registry, const FrameContext& frame);
+    /// The mobile the keys move (null before Tab), and whether the lamps are switched off.
+    Entity selectedMobile() const { return mSelectedMobile; }
+    bool lampsOff() const { return mLampsOff; }
+    /// While set, the mouse is the overlay's: no mouse look.
+    void setMouseTaken(bool taken) { mMouseTaken = taken; }
 
 private:
     void selectNextMobile(Registry& registry);
@@ -39,6 +44,7 @@ private:
     float mYaw = 0.f, mPitch = 0.f; ///< radians
     bool mTabDown = false, mCDown = false, mHDown = false, mLDown = false;
     bool mLampsOff = false;
+    bool mMouseTaken = false;
     std::unordered_map<Entity, float> mLampIntensity; ///< while off: each lamp's intensity
     bool mCameraTaken = false;
     std::optional<PathFollower> mStashedPath; ///< the camera's script while the player flies

@@ -124,6 +124,28 @@ double FrameProfiler::sampleMs(std::size_t frameSlot, std::string_view name) con
     return total;
 }
 
+std::vector<std::pair<std::string_view, double>>
+FrameProfiler::frameSamples(std::size_t frameSlot) const {
+    std::vector<std::pair<std::string_view, double>> out;
+    if (frameSlot >= mFrames.size()) return out;
+    std::vector<std::uint32_t> seen; // entry -> position in out, + 1
+    for (const Sample& s : mFrames[frameSlot].samples) {
+        if (s.entry >= seen.size()) seen.resize(s.entry + 1, 0);
+        if (seen[s.entry] == 0) {
+            out.emplace_back(mNames[s.entry], 0.0);
+            seen[s.entry] = std::uint32_t(out.size());
+        }
+        out[seen[s.entry] - 1].second += s.durationMs;
+    }
+    return out;
+}
+
+double FrameProfiler::frameMs(std::size_t frameSlot) const {
+    if (frameSlot >= mFrames.size()) return -1.0;
+    const Frame& f = mFrames[frameSlot];
+    return f.endMs >= f.startMs ? f.endMs - f.startMs : -1.0; // an open frame ends at 0
+}
+
 std::vector<ProfileStats> FrameProfiler::statistics() const {
     // Per entry, the total time it took in each frame it ran in (an entry may run twice).
     std::vector<std::vector<double>> perEntry(mNames.size() + 1);

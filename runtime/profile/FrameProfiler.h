@@ -69,6 +69,11 @@ public:
     std::size_t frameCount() const { return mFrames.size(); }
     /// Duration of `name` in a recorded frame (ms), or a negative value if it did not run.
     double sampleMs(std::size_t frameSlot, std::string_view name) const;
+    /// Every entry that ran in a recorded frame with its total duration there (ms), in the
+    /// order each first ran; empty for a slot not recorded. Cheap: for a live display.
+    std::vector<std::pair<std::string_view, double>> frameSamples(std::size_t frameSlot) const;
+    /// Wall time of a recorded frame (ms), or a negative value.
+    double frameMs(std::size_t frameSlot) const;
 
     void writeChromeTrace(const std::filesystem::path& path) const; ///< throws qgi::Error
     void writeCsv(const std::filesystem::path& path) const;         ///< throws qgi::Error

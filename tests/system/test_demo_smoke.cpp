@@ -143,7 +143,7 @@ TEST(DemoSmoke, HelpExitsZeroAndListsTheOptions) {
          {"--scene", "--headless", "--frames", "--width", "--height", "--camera-path",
           "--screenshot", "--profile", "--seed", "--export-scene", "--context", "--gl-debug",
           "--photons", "--mode", "--estimator", "--disc-radius", "--full-recompute",
-          "--export-irradiance"})
+          "--export-irradiance", "--overlay"})
         EXPECT_NE(run.output.find(option), std::string::npos) << option;
 }
 
@@ -584,6 +584,20 @@ TEST(DemoSmoke, EglContextRendersWithoutADisplay) {
             std::any_of(png.rgba.begin(), png.rgba.end(), [](std::uint8_t v) { return v > 0; }))
             << context << ": a black frame";
     }
+}
+
+TEST(DemoSmoke, TheOverlayDrawsInTheWindowButNeverInScreenshots) {
+    const fs::path dir = scratchDir();
+    const std::string a = (dir / "overlay_on").string(), b = (dir / "overlay_off").string();
+    const std::string common =
+        "--scene cornell --headless --frames 3 --width 96 --height 64 --photons 2000 --quiet ";
+    const RunResult on = runDemo(common + "--overlay on --gl-debug --screenshot " + a);
+    ASSERT_EQ(on.exitCode, 0) << on.output;
+    EXPECT_EQ(on.output.find("error: GL "), std::string::npos) << on.output;
+    EXPECT_EQ(on.output.find("warning: GL "), std::string::npos) << on.output;
+    ASSERT_EQ(runDemo(common + "--overlay off --screenshot " + b).exitCode, 0);
+    EXPECT_TRUE(readExr(a + ".exr").rgba == readExr(b + ".exr").rgba);
+    EXPECT_TRUE(readPng(a + ".png").rgba == readPng(b + ".png").rgba);
 }
 
 TEST(DemoSmoke, SameSeedSameImage) {

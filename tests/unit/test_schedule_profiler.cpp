@@ -270,6 +270,24 @@ TEST(Profiler, LateGpuSamplesLandInTheirFrame) {
     EXPECT_EQ(p.statistics()[1].count, 1u);
 }
 
+TEST(Profiler, AFramesSamplesComeInTheOrderTheyFirstRanSummedPerEntry) {
+    FrameProfiler p;
+    p.beginFrame(0);
+    p.endFrame();
+    p.recordSample("photons", 0, -1.0, 2.0, FrameProfiler::Track::Cpu);
+    p.recordSample("render", 0, -1.0, 5.0, FrameProfiler::Track::Gpu);
+    p.recordSample("photons", 0, -1.0, 0.5, FrameProfiler::Track::Cpu); // ran twice
+    const auto samples = p.frameSamples(0);
+    ASSERT_EQ(samples.size(), 2u);
+    EXPECT_EQ(samples[0].first, "photons");
+    EXPECT_DOUBLE_EQ(samples[0].second, 2.5);
+    EXPECT_EQ(samples[1].first, "render");
+    EXPECT_DOUBLE_EQ(samples[1].second, 5.0);
+    EXPECT_TRUE(p.frameSamples(1).empty());
+    EXPECT_GE(p.frameMs(0), 0.0);
+    EXPECT_LT(p.frameMs(1), 0.0);
+}
+
 TEST(Profiler, NestedScopesGetQualifiedNames) {
     FrameProfiler p;
     p.beginFrame(0);
