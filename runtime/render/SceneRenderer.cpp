@@ -274,9 +274,9 @@ void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
     const int rows = int(std::max<std::size_t>(1, (tiles + kVlfAtlasTiles - 1) / kVlfAtlasTiles));
     GLint maxSize = 0;
     glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
-    if (rows * m > maxSize)
+    if (width > maxSize || rows * m > maxSize)
         fail("VLF tile atlas of ", width, "x", rows * m, " texels exceeds the GL limit ", maxSize,
-             " (fewer directions or lines)");
+             " (fewer directions or lines, or smaller tiles)");
     std::vector<glm::vec4> texels(std::size_t(width) * std::size_t(rows * m), glm::vec4(0.f));
     for (std::size_t t = 0; t < tiles; ++t) {
         const std::size_t x0 = (t % kVlfAtlasTiles) * std::size_t(m);

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 namespace qgi::vlf {
 namespace {
@@ -111,15 +112,18 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     // Irradiance maps with the exact fraction of each texel inside the face: every triangle,
     // in texel units, clipped against the texels its bounds touch.
     const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
-    std::uint32_t texels = 0;
+    std::uint64_t texels = 0;
     for (const Face& f : v.mFaces) {
         FaceMap m;
         m.width = std::uint32_t(std::clamp(std::ceil(f.extentU / texel), 1.f, 4096.f));
         m.height = std::uint32_t(std::clamp(std::ceil(f.extentV / texel), 1.f, 4096.f));
         m.texelU = std::max(f.extentU / float(m.width), 1e-9f);
         m.texelV = std::max(f.extentV / float(m.height), 1e-9f);
-        m.firstTexel = texels;
-        texels += m.width * m.height;
+        m.firstTexel = std::uint32_t(texels);
+        texels += std::uint64_t(m.width) * m.height;
+        if (texels > std::numeric_limits<std::uint32_t>::max())
+            fail("VLF: the faces' irradiance maps need more than 2^32 texels (", v.mFaces.size(),
+                 " faces at ", texel, " m a texel): raise VlfSettings.texelCells");
         v.mFaceMaps.push_back(m);
     }
     v.mCoverage.assign(texels, 0.f);
