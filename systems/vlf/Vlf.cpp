@@ -276,8 +276,7 @@ std::int32_t Vlf::tileAt(std::size_t sf, std::size_t psf, int i, int j) const {
 std::int64_t Vlf::cellIndex(std::size_t sf, std::size_t psf, int i, int j) const {
     const std::int32_t tile = tileAt(sf, psf, i, j);
     if (tile < 0) return -1;
-    const int m = mSettings.tileSize;
-    return std::int64_t(tile) * m * m + (j % m) * m + (i % m);
+    return std::int64_t(cellOffset(tile, i, j, mSettings.tileSize));
 }
 
 VlfMemory Vlf::memory() const {

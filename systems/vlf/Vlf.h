@@ -26,6 +26,13 @@ inline TiledIndex toTiled(int i, int j, int m) {
 inline glm::ivec2 toGlobal(const TiledIndex& x, int m) {
     return {x.s * m + x.u, x.t * m + x.v};
 }
+/// Where global cell (i, j) lies in the cell arrays, given the slot `tile` of its tile: each
+/// tile's m x m cells row by row.
+inline std::size_t cellOffset(std::int32_t tile, int i, int j, int m) {
+    const TiledIndex x = toTiled(i, j, m);
+    return (std::size_t(tile) * std::size_t(m) + std::size_t(x.v)) * std::size_t(m) +
+           std::size_t(x.u);
+}
 
 /// The irradiance map of one face: width x height texels of texelU x texelV metres tiling the
 /// face's bounding rectangle exactly (Face::origin, axisU, axisV), starting at `firstTexel` of

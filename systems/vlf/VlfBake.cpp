@@ -252,7 +252,7 @@ private:
                         const glm::vec3 E = irradianceFrom(light, f, x, from);
                         if (E != glm::vec3(0.f)) L += phong(f, from, o, E);
                     }
-                    const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
+                    const std::size_t c = cellOffset(tile, i, jj, m);
                     mUnshotL[c] = L;
                     mVlf.tiles()[c] = glm::vec4(L, 1.f);
                 });
@@ -471,7 +471,7 @@ private:
                 const glm::vec3 o = float(b.side) * mDirs.direction(j);
                 if (f.isMirror()) {
                     forEachCell(b, [&](std::int32_t tile, int i, int jj) {
-                        const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
+                        const std::size_t c = cellOffset(tile, i, jj, m);
                         const glm::vec3 x = cellPoint(f, j, i, jj);
                         const glm::vec3 from = 2.f * glm::dot(f.normal, o) * f.normal - o;
                         const std::optional<glm::vec3> in =
@@ -490,7 +490,7 @@ private:
                 // its lobe in the same order).
                 cells.clear();
                 forEachCell(b, [&](std::int32_t tile, int i, int jj) {
-                    const std::size_t c = std::size_t(tile) * m * m + (jj % m) * m + (i % m);
+                    const std::size_t c = cellOffset(tile, i, jj, m);
                     cells.push_back({c, cellPoint(f, j, i, jj), glm::vec3(0.f)});
                 });
                 for (const auto& [i2, w] : mLobes[sf * mDirs.size() + j])

@@ -8,6 +8,7 @@
 #include <glm/gtc/constants.hpp>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -195,6 +196,17 @@ TEST(VlfTiling, IndexRoundTrips) {
                 EXPECT_LT(t.v, m);
                 EXPECT_EQ(toGlobal(t, m), glm::ivec2(i, j));
             }
+        // The cells of one tile (here tile (1, 2) of the subfield, in slot 3) fill exactly
+        // that slot's m x m places of the cell array.
+        std::vector<int> seen(std::size_t(m) * m, 0);
+        for (int i = m; i < 2 * m; ++i)
+            for (int j = 2 * m; j < 3 * m; ++j) {
+                const std::size_t c = cellOffset(3, i, j, m);
+                ASSERT_GE(c, std::size_t(3 * m * m));
+                ASSERT_LT(c, std::size_t(4 * m * m));
+                ++seen[c - std::size_t(3 * m * m)];
+            }
+        EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), m * m);
     }
 }
 
