@@ -375,7 +375,8 @@ int runDemo(const DemoOptions& options) {
     render.exposure =
         options.exposure > 0.f ? options.exposure : world.ctx().get<SceneInfo>().exposure;
     FrameSchedule frame(world, frameSettings);
-    FlyController controller(window.handle());
+    const GlfwInput input(window.handle());
+    FlyController controller(input);
     if (frame.renderer()) frame.renderer()->setShowPointCache(options.showPoints);
     // The overlay draws through GLFW: not in an EGL pbuffer.
     std::unique_ptr<Overlay> overlay;

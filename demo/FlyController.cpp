@@ -23,10 +23,6 @@ namespace qgi::demo {
 
 namespace {
 
-bool pressed(GLFWwindow* w, int key) {
-    return glfwGetKey(w, key) == GLFW_PRESS;
-}
-
 /// What moves and switches as one: a mobile mesh, or the glTF node whose primitives several
 /// mobile meshes are (the importer makes each primitive a child named "<node>#<k>" of a node
 /// that has no Mesh of its own).
@@ -41,6 +37,20 @@ Entity mobileUnit(const Registry& registry, Entity mesh) {
 }
 
 } // namespace
+
+bool GlfwInput::key(int glfwKey) const {
+    return glfwGetKey(mWindow, glfwKey) == GLFW_PRESS;
+}
+
+bool GlfwInput::rightButton() const {
+    return glfwGetMouseButton(mWindow, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS;
+}
+
+glm::dvec2 GlfwInput::cursor() const {
+    glm::dvec2 at;
+    glfwGetCursorPos(mWindow, &at.x, &at.y);
+    return at;
+}
 
 void FlyController::selectNextMobile(Registry& registry) {
     std::vector<Entity> units;
@@ -94,20 +104,20 @@ void FlyController::switchLamps(Registry& registry) {
 void FlyController::update(Registry& registry, const FrameContext& frame) {
     const float dt = std::min(frame.dt, 0.1f);
 
-    const bool tab = pressed(mWindow, GLFW_KEY_TAB);
+    const bool tab = pressed(GLFW_KEY_TAB);
     if (tab && !mTabDown) selectNextMobile(registry);
     mTabDown = tab;
-    const bool h = pressed(mWindow, GLFW_KEY_H);
+    const bool h = pressed(GLFW_KEY_H);
     if (h && !mHDown) toggleSelectedMobile(registry);
     mHDown = h;
-    const bool l = pressed(mWindow, GLFW_KEY_L);
+    const bool l = pressed(GLFW_KEY_L);
     if (l && !mLDown) switchLamps(registry);
     mLDown = l;
 
     const Entity camera = findActiveCamera(registry);
     if (!camera || !registry.has<Transform>(camera)) return;
 
-    const bool c = pressed(mWindow, GLFW_KEY_C);
+    const bool c = pressed(GLFW_KEY_C);
     if (c && !mCDown && mCameraTaken) { // the scripted path takes the camera back
         mCameraTaken = false;
         if (mStashedPath) registry.emplaceOrReplace<PathFollower>(camera, std::move(*mStashedPath));
@@ -116,13 +126,11 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
     mCDown = c;
 
     // Mouse look while the right button is held.
-    double x, y;
-    glfwGetCursorPos(mWindow, &x, &y);
-    const bool looking =
-        !mMouseTaken && glfwGetMouseButton(mWindow, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS;
-    const bool moving = pressed(mWindow, GLFW_KEY_W) || pressed(mWindow, GLFW_KEY_A) ||
-                        pressed(mWindow, GLFW_KEY_S) || pressed(mWindow, GLFW_KEY_D) ||
-                        pressed(mWindow, GLFW_KEY_Q) || pressed(mWindow, GLFW_KEY_E);
+    const glm::dvec2 cursor = mInput.cursor();
+    const double x = cursor.x, y = cursor.y;
+    const bool looking = !mMouseTaken && mInput.rightButton();
+    const bool moving = pressed(GLFW_KEY_W) || pressed(GLFW_KEY_A) || pressed(GLFW_KEY_S) ||
+                        pressed(GLFW_KEY_D) || pressed(GLFW_KEY_Q) || pressed(GLFW_KEY_E);
     if ((looking || moving) && !mCameraTaken) {
         // Take the camera over from its path, starting from where it is now.
         mCameraTaken = true;
@@ -146,26 +154,26 @@ void FlyController::update(Registry& registry, const FrameContext& frame) {
         Transform& t = registry.patch<Transform>(camera);
         t.rotation =
             glm::angleAxis(mYaw, glm::vec3(0, 1, 0)) * glm::angleAxis(mPitch, glm::vec3(1, 0, 0));
-        const float speed = (pressed(mWindow, GLFW_KEY_LEFT_SHIFT) ? 8.f : 2.f) * dt;
+        const float speed = (pressed(GLFW_KEY_LEFT_SHIFT) ? 8.f : 2.f) * dt;
         const glm::vec3 forward = t.rotation * glm::vec3(0, 0, -1);
         const glm::vec3 right = t.rotation * glm::vec3(1, 0, 0);
-        if (pressed(mWindow, GLFW_KEY_W)) t.translation += forward * speed;
-        if (pressed(mWindow, GLFW_KEY_S)) t.translation -= forward * speed;
-        if (pressed(mWindow, GLFW_KEY_D)) t.translation += right * speed;
-        if (pressed(mWindow, GLFW_KEY_A)) t.translation -= right * speed;
-        if (pressed(mWindow, GLFW_KEY_E)) t.translation.y += speed;
-        if (pressed(mWindow, GLFW_KEY_Q)) t.translation.y -= speed;
+        if (pressed(GLFW_KEY_W)) t.translation += forward * speed;
+        if (pressed(GLFW_KEY_S)) t.translation -= forward * speed;
+        if (pressed(GLFW_KEY_D)) t.translation += right * speed;
+        if (pressed(GLFW_KEY_A)) t.translation -= right * speed;
+        if (pressed(GLFW_KEY_E)) t.translation.y += speed;
+        if (pressed(GLFW_KEY_Q)) t.translation.y -= speed;
     }
 
     if (mSelectedMobile && registry.alive(mSelectedMobile)) {
         glm::vec3 step(0.f);
         const float speed = 0.5f * dt; // metres per second
-        if (pressed(mWindow, GLFW_KEY_LEFT)) step.x -= speed;
-        if (pressed(mWindow, GLFW_KEY_RIGHT)) step.x += speed;
-        if (pressed(mWindow, GLFW_KEY_UP)) step.z -= speed;
-        if (pressed(mWindow, GLFW_KEY_DOWN)) step.z += speed;
-        if (pressed(mWindow, GLFW_KEY_PAGE_UP)) step.y += speed;
-        if (pressed(mWindow, GLFW_KEY_PAGE_DOWN)) step.y -= speed;
+        if (pressed(GLFW_KEY_LEFT)) step.x -= speed;
+        if (pressed(GLFW_KEY_RIGHT)) step.x += speed;
+        if (pressed(GLFW_KEY_UP)) step.z -= speed;
+        if (pressed(GLFW_KEY_DOWN)) step.z += speed;
+        if (pressed(GLFW_KEY_PAGE_UP)) step.y += speed;
+        if (pressed(GLFW_KEY_PAGE_DOWN)) step.y -= speed;
         if (step != glm::vec3(0.f)) {
             registry.remove<PathFollower>(mSelectedMobile); // the player drives it now
             registry.patch<Transform>(mSelectedMobile).translation += step;

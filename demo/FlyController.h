@@ -7,22 +7,47 @@
 #include <optional>
 #include <unordered_map>
 
+#include <glm/vec2.hpp>
+
 struct GLFWwindow;
 
 namespace qgi::demo {
+
+/// What the controller reads of the keyboard and mouse, by GLFW key codes: a window's state
+/// (GlfwInput), or a test's.
+class Input {
+public:
+    virtual ~Input() = default;
+    virtual bool key(int glfwKey) const = 0;
+    virtual bool rightButton() const = 0;
+    virtual glm::dvec2 cursor() const = 0; ///< pixels
+};
+
+/// Input polled from a GLFW window.
+class GlfwInput final : public Input {
+public:
+    explicit GlfwInput(GLFWwindow* window) : mWindow(window) {}
+    bool key(int glfwKey) const override;
+    bool rightButton() const override;
+    glm::dvec2 cursor() const override;
+
+private:
+    GLFWwindow* mWindow;
+};
 
 /** Interactive input: a fly camera (WASD + right-mouse look, Q/E down/up, Shift faster) and
  *  keyboard moves of the selected mobile (Tab selects, arrows and PageUp/PageDown move, H
  *  takes it out of the world and puts it back), and L switching the lamps (point and spot
  *  lights) off and on. Taking the camera stops its scripted path; C gives it back.
- *  Reads:  GLFW key and mouse state
+ *  Reads:  key and mouse state (Input)
  *  A glTF node whose primitives are several mobile meshes is selected, moved and switched as
  *  one.
  *  Writes: Transform of the active camera and of the selected mobile, MobileMesh::active of
  *          the selected mobile's meshes, PointLight and SpotLight intensity (patched) */
 class FlyController {
 public:
-    explicit FlyController(GLFWwindow* window) : mWindow(window) {}
+    /// `input` must outlive the controller.
+    explicit FlyController(const Input& input) : mInput(input) {}
     void update(Registry& registry, const FrameContext& frame);
     /// The mobile the keys move (null before Tab), and whether the lamps are switched off.
     Entity selectedMobile() const { return mSelectedMobile; }
@@ -37,7 +62,9 @@ private:
     /// Switches every point and spot light off (intensity 0), or back to what it was.
     void switchLamps(Registry& registry);
 
-    GLFWwindow* mWindow;
+    bool pressed(int glfwKey) const { return mInput.key(glfwKey); }
+
+    const Input& mInput;
     Entity mSelectedMobile{};
     bool mLooking = false;
     double mLastX = 0, mLastY = 0;
