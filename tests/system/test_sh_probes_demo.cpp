@@ -61,7 +61,9 @@ TEST(ShProbesDemo, ExportsEveryAvatarsShAndProfilesThePhase) {
     std::ifstream trace(profile + ".csv");
     std::string traceHeader;
     ASSERT_TRUE(std::getline(trace, traceHeader));
-    EXPECT_NE(traceHeader.find("sh.probes"), std::string::npos) << traceHeader;
+    // The phase and its two stages, each a column of the profile.
+    for (const char* column : {",sh.probes_ms", ",sh.probes/refresh_ms", ",sh.probes/avatars_ms"})
+        EXPECT_NE(traceHeader.find(column), std::string::npos) << column << ": " << traceHeader;
 }
 
 } // namespace
