@@ -15,6 +15,7 @@
 #include "demo/CameraPath.h"
 #include "demo/FlyController.h"
 #include "demo/Overlay.h"
+#include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
 #include "runtime/io/CacheFile.h"
 #include "runtime/io/IrradianceExport.h"
@@ -382,10 +383,17 @@ int runDemo(const DemoOptions& options) {
     std::unique_ptr<Overlay> overlay;
     const bool overlayWanted =
         options.overlay == "on" || (options.overlay == "auto" && !options.headless);
-    if (overlayWanted && window.handle())
-        overlay = std::make_unique<Overlay>(window.handle());
-    else if (options.overlay == "on")
-        logWarning("--overlay on: an EGL pbuffer has no window for it; drawn without");
+    if (overlayWanted && window.handle()) {
+        try {
+            overlay = std::make_unique<Overlay>(window.handle());
+        } catch (const Error& e) {
+            if (options.overlay == "on") throw;
+            logWarning(e.what(), "; running without it (--overlay off says nothing)");
+        }
+    } else if (options.overlay == "on") {
+        logWarning("--overlay on: an EGL pbuffer has no window to draw it in; running without "
+                   "the overlay (--context window draws it)");
+    }
     OverlayInfo overlayInfo;
     overlayInfo.scene = world.ctx().get<SceneInfo>().name;
     overlayInfo.lighting =

@@ -23,9 +23,14 @@ Overlay::Overlay(GLFWwindow* window) : mWindow(window) {
     io.IniFilename = nullptr; // nothing written beside the game
     ImGui::StyleColorsDark();
     // The backends chain to the callbacks GLFW already has; the fly camera polls.
-    if (!ImGui_ImplGlfw_InitForOpenGL(window, true) || !ImGui_ImplOpenGL3_Init("#version 450")) {
+    if (!ImGui_ImplGlfw_InitForOpenGL(window, true)) {
         ImGui::DestroyContext();
-        fail("overlay: Dear ImGui could not start on this GL context");
+        fail("overlay: Dear ImGui could not start on this window");
+    }
+    if (!ImGui_ImplOpenGL3_Init("#version 450")) { // its GL loader found no libGL
+        ImGui_ImplGlfw_Shutdown();
+        ImGui::DestroyContext();
+        fail("overlay: Dear ImGui could not load OpenGL for its drawing");
     }
 }
 
@@ -43,12 +48,24 @@ void Overlay::draw(const FrameProfiler& profiler, const OverlayInfo& info) {
     const bool f1 = glfwGetKey(mWindow, GLFW_KEY_F1) == GLFW_PRESS;
     if (f1 && !mF1Down) mVisible = !mVisible;
     mF1Down = f1;
+    const auto now = std::chrono::steady_clock::now();
+    const auto smooth = [](double& smoothed, double value) {
+        if (value > 0.0) smoothed = smoothed > 0.0 ? 0.9 * smoothed + 0.1 * value : value;
+    };
+    if (mLastDraw != std::chrono::steady_clock::time_point{})
+        smooth(mFrameMs, std::chrono::duration<double, std::milli>(now - mLastDraw).count());
+    mLastDraw = now;
     if (!mVisible || profiler.frameCount() == 0) return;
 
-    const std::size_t last = profiler.frameCount() - 1;
-    const double frameMs = profiler.frameMs(last);
-    if (frameMs > 0.0)
-        mSmoothedMs = mSmoothedMs > 0.0 ? 0.9 * mSmoothedMs + 0.1 * frameMs : frameMs;
+    // The newest frame whose render passes have reported: on a GPU their timer queries are
+    // read a few frames late (PassTimer); elsewhere the frame just run.
+    std::size_t last = profiler.frameCount() - 1;
+    for (std::size_t back = 0; back <= 6 && back < profiler.frameCount(); ++back)
+        if (profiler.sampleMs(profiler.frameCount() - 1 - back, "render/scene") >= 0.0) {
+            last = profiler.frameCount() - 1 - back;
+            break;
+        }
+    smooth(mScheduleMs, profiler.frameMs(profiler.frameCount() - 1));
 
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
@@ -58,8 +75,8 @@ void Overlay::draw(const FrameProfiler& profiler, const OverlayInfo& info) {
     ImGui::Begin("qgi", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
     ImGui::Text("%s", info.scene.c_str());
     ImGui::TextUnformatted(info.lighting.c_str());
-    ImGui::Text("frame %.1f ms (%.0f fps)", mSmoothedMs,
-                mSmoothedMs > 0.0 ? 1000.0 / mSmoothedMs : 0.0);
+    ImGui::Text("frame %.1f ms (%.0f fps), systems %.1f ms", mFrameMs,
+                mFrameMs > 0.0 ? 1000.0 / mFrameMs : 0.0, mScheduleMs);
     ImGui::Separator();
     // The last frame's entries: systems, each followed by its stages, indented (a stage is
     // recorded when it closes, before its system).

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <chrono>
 #include <string>
 
 struct GLFWwindow;
@@ -20,10 +21,11 @@ struct OverlayInfo {
 };
 
 /** The interactive demo's overlay (Dear ImGui, drawn into the window's framebuffer after the
- *  frame, so never into screenshots): the frame time and each schedule entry's share of the
- *  last frame, what is lit and how, the selected mobile and the keys. F1 hides and shows it.
- *  Needs a GLFW window with its GL context current; one per process (ImGui's context is
- *  global). */
+ *  frame, so never into screenshots): the frame rate, and each schedule entry's time in the
+ *  newest frame the profiler holds complete (GPU pass times arrive a few frames late), what is
+ *  lit and how, the selected mobile and the keys. F1 hides and shows it. Needs a GLFW window
+ *  with its GL context current; one per process (ImGui's context is global). The constructor
+ *  throws qgi::Error when ImGui cannot start on the context, leaving GLFW as it was. */
 class Overlay {
 public:
     explicit Overlay(GLFWwindow* window);
@@ -40,7 +42,10 @@ private:
     GLFWwindow* mWindow;
     bool mVisible = true;
     bool mF1Down = false;
-    double mSmoothedMs = 0.0; ///< frame time, exponentially smoothed for a readable number
+    /// Wall time between draws (the whole frame: schedule, overlay, swap, waits) and the
+    /// schedule's own time, exponentially smoothed for readable numbers.
+    double mFrameMs = 0.0, mScheduleMs = 0.0;
+    std::chrono::steady_clock::time_point mLastDraw{};
 };
 
 } // namespace qgi::demo

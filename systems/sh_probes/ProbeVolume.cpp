@@ -96,8 +96,9 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
         sum += weights[c];
         sumEnabled += trilinear[c];
     }
-    bool fallback = false;
+    bool fallback = false, hidden = false;
     if (!(sum > 0.f)) {
+        hidden = sumEnabled > 0.f; // enabled corners weighed, and visibility took them all
         if (!(sumEnabled > 0.f)) {
             // All corners disabled, or p sits exactly on the far face of disabled corners:
             // try the enabled corners with equal weight before giving up.
@@ -129,6 +130,7 @@ bool ProbeVolume::interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* bl
             blend->weights[c] = weights[c] * inverse;
         }
         blend->fallback = fallback;
+        blend->hidden = hidden;
     }
     return true;
 }

@@ -64,7 +64,11 @@ struct ProbeGrid {
 struct ProbeBlend {
     std::uint32_t probes[8] = {}; ///< the cell's corner probes, corner c = bits (x, y, z) of c
     float weights[8] = {};        ///< normalised weights used; 0 for suppressed corners
-    bool fallback = false;        ///< every enabled corner was hidden: blended ignoring visibility
+    /// No corner kept a weight, so the enabled ones were blended plainly: every enabled corner
+    /// with a trilinear weight was hidden (`hidden`), or p lies where only disabled corners
+    /// weigh (on a face or past the lattice's edge beside disabled probes).
+    bool fallback = false;
+    bool hidden = false; ///< every enabled corner was hidden from p by geometry
 };
 
 /** World resource: the SH irradiance volume (seed 002 section 3.4). Each probe holds order-2
@@ -117,9 +121,10 @@ public:
      *    - 0 when the probe is disabled;
      *    - its visibility from p: the trilinear blend, over the 8 lattice points around p, of
      *      whether the probe is visible from each (1 where the cell's mask is not computed);
-     *  and normalised. When every enabled corner is hidden, visibility is ignored (the blend
-     *  is flagged `fallback`). Returns false, leaving `out` unchanged, when all 8 corners are
-     *  disabled. Continuous in p wherever some enabled corner is visible.                   */
+     *  and normalised. When no corner keeps a weight, the enabled corners are blended ignoring
+     *  visibility (flagged `fallback`, and `hidden` where visibility was what zeroed them).
+     *  Returns false, leaving `out` unchanged, when all 8 corners are disabled. Continuous in
+     *  p wherever some enabled corner is visible.                                            */
     bool interpolate(const glm::vec3& p, sh::ShRgb& out, ProbeBlend* blend = nullptr) const;
 
 private:

@@ -681,16 +681,19 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
                 ++mStats.unlit; // left as it was
                 return;
             }
-            if (blend.fallback) {
+            mStats.fallbacks += blend.fallback;
+            if (blend.hidden) {
                 // Every probe around it is behind a wall (a closet narrower than the probe
                 // spacing): blending them anyway would light it through the walls. It keeps
                 // the light it had.
-                ++mStats.fallbacks;
+                ++mStats.hidden;
                 if (mWarnedHidden.insert(e).second)
                     logWarning("SH probes: avatar ", entityName(registry, e),
                                " stands where every probe around it is behind a wall (a space "
                                "narrower than the ",
-                               grid.spacing, " m probe spacing); it keeps its last lighting there");
+                               grid.spacing,
+                               " m probe spacing); it keeps its last lighting there (none, if it "
+                               "has not been lit yet)");
                 return;
             }
             lighting.coefficients = blended;

@@ -85,7 +85,8 @@ public:
         std::size_t staleAfter = 0;      ///< stale probes left for later frames
         std::size_t visibilityCells = 0; ///< cell visibility masks computed this frame
         std::size_t avatars = 0;         ///< avatars written
-        std::size_t fallbacks = 0; ///< avatars whose corners were all hidden: kept their light
+        std::size_t fallbacks = 0;       ///< avatars blended without their corners' weights
+        std::size_t hidden = 0;          ///< of them, those whose probes all hid: kept their light
         std::size_t unlit = 0;           ///< avatars among 8 disabled probes (left as they were)
         std::size_t outside = 0;         ///< avatars over a probe spacing outside the volume
     };
