@@ -235,7 +235,7 @@ bool wantVlf(const Registry& registry) {
             any |= vlf::VlfScene::fromComponent(m).specular != glm::vec3(0.f);
         });
     if (!any) return false;
-    const auto scene = vlf::VlfScene::fromRegistry(registry);
+    const auto scene = vlf::VlfScene::fromRegistry(registry, nullptr, /*traced=*/false);
     std::size_t specular = 0;
     for (const vlf::Face& f : scene->faces())
         specular += f.isSpecular();

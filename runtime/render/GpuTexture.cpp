@@ -17,6 +17,18 @@ void useTightUnpacking() {
     glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
 }
 
+void useTightPacking() {
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+    glPixelStorei(GL_PACK_IMAGE_HEIGHT, 0);
+    glPixelStorei(GL_PACK_SKIP_ROWS, 0);
+    glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+    glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
+    glPixelStorei(GL_PACK_SWAP_BYTES, GL_FALSE);
+    glPixelStorei(GL_PACK_LSB_FIRST, GL_FALSE);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+}
+
 GlTexture createColorTexture(int width, int height, std::span<const std::uint8_t> rgba, bool srgb) {
     const int levels = std::bit_width(unsigned(std::max(width, height)));
     GlTexture texture = createTexture(GL_TEXTURE_2D);

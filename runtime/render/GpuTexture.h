@@ -15,5 +15,7 @@ GlTexture createColorTexture(int width, int height, std::span<const std::uint8_t
 /// Sets the pixel unpack state to tightly packed rows read from client memory, whatever the
 /// application left there, before a texture upload.
 void useTightUnpacking();
+/// The same for read-backs into client memory (pixel pack state).
+void useTightPacking();
 
 } // namespace qgi

@@ -92,11 +92,7 @@ template <typename T>
 std::vector<T> readTexture(GLuint texture, int width, int height, GLenum type) {
     const std::size_t row = std::size_t(width) * 4;
     std::vector<T> bottomUp(row * std::size_t(height));
-    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
-    glPixelStorei(GL_PACK_ALIGNMENT, 4);
-    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
-    glPixelStorei(GL_PACK_SKIP_ROWS, 0);
-    glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+    useTightPacking();
     glGetTextureImage(texture, 0, GL_RGBA, type, GLsizei(bottomUp.size() * sizeof(T)),
                       bottomUp.data());
     std::vector<T> topDown(bottomUp.size());

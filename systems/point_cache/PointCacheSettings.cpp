@@ -4,6 +4,7 @@
 #include "runtime/scene/SceneInfo.h"
 
 #include <glm/geometric.hpp>
+#include <glm/gtx/component_wise.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -68,11 +69,12 @@ PointCacheSettings resolvePointCacheSettings(const PointCacheSettings& settings,
         if (s.rMin == 0.f) s.rMin = s.rMax / kRMaxPerRMin;
     }
     if (s.rMin > s.rMax) fail("PointCacheSettings: rMin = ", s.rMin, " exceeds rMax = ", s.rMax);
-    // The bake's grid of rMax cells keys 2^21 cells along each axis.
-    const float diagonal = bounds.empty() ? 0.f : glm::length(bounds.extent());
-    if (std::isfinite(diagonal) && s.rMax < kMinRadiusPerDiagonal * diagonal)
-        fail("PointCacheSettings.rMax = ", s.rMax, " m is below a millionth of the scene's ",
-             diagonal, " m diagonal: the bake cannot index so fine a spacing");
+    // The bake's grid of rMax cells keys 2^20 cells either side of the origin along each axis.
+    const float reach =
+        bounds.empty() ? 0.f : glm::compMax(glm::max(glm::abs(bounds.min), glm::abs(bounds.max)));
+    if (std::isfinite(reach) && s.rMax < kMinRadiusPerReach * reach)
+        fail("PointCacheSettings.rMax = ", s.rMax, " m is below a millionth of the scene's ", reach,
+             " m reach from the origin: the bake cannot index so fine a spacing");
     if (s.aoDistance == 0.f) s.aoDistance = 2.f * s.rMax;
     if (s.detpRadius == 0.f) s.detpRadius = 3.f * s.rMax;
     return s;

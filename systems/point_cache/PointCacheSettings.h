@@ -9,8 +9,9 @@ struct Aabb;
 
 /// Scene defaults of the spacing radii (see PointCacheSettings::rMin, rMax).
 inline constexpr float kRMaxPerDiagonal = 250.f;
-/// Smallest rMax, as a share of the scene's diagonal, that the bake's grid can index.
-inline constexpr float kMinRadiusPerDiagonal = 1e-6f;
+/// Smallest rMax, as a share of the scene's farthest coordinate from the origin, that the
+/// bake's grid can key (2^20 cells either side; just above 2^-20).
+inline constexpr float kMinRadiusPerReach = 1e-6f;
 inline constexpr float kRMaxPerRMin = 4.f;
 
 /** Settings of the point cache (seed 003). The paper leaves every number open (digest section

@@ -109,6 +109,19 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     for (Face& f : v.mFaces)
         f.triangles.clear();
 
+    // Settings within their ranges can still ask for more than the machine has: say so before
+    // the big arrays (the texel maps first, then everything).
+    const double limit = settings.maxBakeBytes > 0 ? double(settings.maxBakeBytes)
+                                                   : 0.5 * double(::sysconf(_SC_PHYS_PAGES)) *
+                                                         double(::sysconf(_SC_PAGESIZE));
+    const auto tooBig = [&](double bytes) {
+        fail("VLF: baking ", v.mDirections->size(), " directions at ", settings.linesPerSide, "x",
+             settings.linesPerSide, " lines (direction level ", settings.directionLevel,
+             ") needs about ", bytes / 1e9, " GB, over the ", limit / 1e9,
+             " GB allowed (VlfSettings.maxBakeBytes; by default half of this machine's memory): "
+             "lower the direction level or the lines per side");
+    };
+
     // Irradiance maps with the exact fraction of each texel inside the face: every triangle,
     // in texel units, clipped against the texels its bounds touch.
     const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
@@ -126,6 +139,10 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
                  " faces at ", texel, " m a texel): raise VlfSettings.texelCells");
         v.mFaceMaps.push_back(m);
     }
+    // The texel arrays alone, as memory() counts them for the bake.
+    const double texelBytes =
+        double(texels) * double(sizeof(float) + (3 + std::min(kBakeChunks, l)) * sizeof(glm::vec3));
+    if (limit > 0.0 && texelBytes > limit) tooBig(texelBytes);
     v.mCoverage.assign(texels, 0.f);
     v.mIrradiance.assign(texels, glm::vec3(0.f));
     for (std::size_t fi = 0; fi < scene.faces().size(); ++fi) {
@@ -215,18 +232,8 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
                 }
         }
     }
-    // Settings within their ranges can still ask for more than the machine has: say so before
-    // the big arrays.
     const VlfMemory need = v.memory();
-    const double limit = settings.maxBakeBytes > 0 ? double(settings.maxBakeBytes)
-                                                   : 0.5 * double(::sysconf(_SC_PHYS_PAGES)) *
-                                                         double(::sysconf(_SC_PAGESIZE));
-    if (limit > 0.0 && double(need.bakeBytes) > limit)
-        fail("VLF: baking ", need.directions, " directions at ", settings.linesPerSide, "x",
-             settings.linesPerSide, " lines (direction level ", settings.directionLevel,
-             ") needs about ", double(need.bakeBytes) / 1e9, " GB, over the ", limit / 1e9,
-             " GB allowed (VlfSettings.maxBakeBytes; by default half of this machine's memory): "
-             "lower the direction level or the lines per side");
+    if (limit > 0.0 && double(need.bakeBytes) > limit) tooBig(double(need.bakeBytes));
     v.mTiles.assign(v.mTileCount * std::size_t(m) * m, glm::vec4(0.f));
     return v;
 }

@@ -206,8 +206,7 @@ private:
                 from = -light.axis;
                 const float c = glm::dot(f.normal, from);
                 if (c <= 0.f) return glm::vec3(0.f);
-                const glm::vec3 start = x + lift * f.normal;
-                if (mScene.occluded(start, start + outside * from)) return glm::vec3(0.f);
+                if (mScene.occluded(x + lift * f.normal, from, outside)) return glm::vec3(0.f);
                 return light.intensity * c;
             }
             const glm::vec3 toLight = light.position - x;

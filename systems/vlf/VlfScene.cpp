@@ -66,7 +66,8 @@ glm::vec3 PunctualLight::intensityTowards(const glm::vec3& d) const {
     return intensity * spotFalloff(glm::dot(d, axis), cosInner, cosOuter);
 }
 
-std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, EmbreeDevice* device) {
+std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, EmbreeDevice* device,
+                                                 bool traced) {
     std::vector<Triangle> triangles;
     std::vector<std::uint32_t> group;
     std::vector<Material> materials;
@@ -138,16 +139,16 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, Embre
     const SceneInfo* info = registry.ctx().find<SceneInfo>();
     auto scene =
         std::make_unique<VlfScene>(std::move(triangles), group, materials, std::move(lights),
-                                   info ? info->environment : glm::vec3(0.f), device);
+                                   info ? info->environment : glm::vec3(0.f), device, traced);
     scene->mEntities = std::move(entities);
     return scene;
 }
 
 VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint32_t>& group,
                    const std::vector<Material>& materials, std::vector<PunctualLight> lights,
-                   const glm::vec3& environment, EmbreeDevice* device)
+                   const glm::vec3& environment, EmbreeDevice* device, bool traced)
     : mLights(std::move(lights)), mEnvironment(environment),
-      mOwnDevice(device ? nullptr : std::make_unique<EmbreeDevice>()),
+      mOwnDevice(device || !traced ? nullptr : std::make_unique<EmbreeDevice>()),
       mDevice(device ? device : mOwnDevice.get()) {
     if (group.size() != triangles.size()) fail("VlfScene: one group per triangle is needed");
     if (!finite(environment)) fail("VlfScene: the environment radiance is not finite");
@@ -220,10 +221,13 @@ VlfScene::VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint3
         h.add(l);
     h.add(mEnvironment);
     mHash = h.value();
-    buildEmbree();
+    if (traced) buildEmbree();
 }
 
 void VlfScene::buildEmbree() {
+    // The device may be the RayScene's: earlier errors were logged; this build reports its own,
+    // and leaves none pending for the next user of the device.
+    mDevice->takeError();
     const RTCDevice device = mDevice->handle();
     GeometryHandle geometry(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE));
     auto* vertices = static_cast<glm::vec3*>(
@@ -246,6 +250,8 @@ void VlfScene::buildEmbree() {
     rtcSetSceneBuildQuality(mScene.get(), RTC_BUILD_QUALITY_HIGH);
     rtcAttachGeometry(mScene.get(), geometry.get());
     rtcCommitScene(mScene.get());
+    if (const auto error = mDevice->takeError())
+        fail("VlfScene: Embree could not build the bake's scene: ", error->message);
 }
 
 namespace {
@@ -323,6 +329,24 @@ std::size_t VlfScene::crossings(const glm::vec3& o, const glm::vec3& d, float tM
         tMin = c.t + merge;
     }
     return count;
+}
+
+bool VlfScene::occluded(const glm::vec3& origin, const glm::vec3& dir, float tFar) const {
+    QGI_ASSERT(mScene.get(), "a VlfScene made without rays is not traced");
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    RTCRay ray{};
+    ray.org_x = origin.x;
+    ray.org_y = origin.y;
+    ray.org_z = origin.z;
+    ray.dir_x = dir.x;
+    ray.dir_y = dir.y;
+    ray.dir_z = dir.z;
+    ray.tnear = 0.f;
+    ray.tfar = tFar;
+    ray.mask = ~0u;
+    rtcOccluded1(mScene.get(), &context, &ray);
+    return ray.tfar < 0.f;
 }
 
 bool VlfScene::occluded(const glm::vec3& a, const glm::vec3& b) const {

@@ -78,10 +78,11 @@ public:
     /// emits already); the
     /// environment from SceneInfo when present. Mobiles and avatars are not part of the VLF.
     /// `device`: the Embree device to build on (the RayScene's, so the engine keeps one); null:
-    /// the scene makes its own. Throws qgi::Error on an empty scene or non-finite data, naming
-    /// the entity.
-    static std::unique_ptr<VlfScene> fromRegistry(const Registry& registry,
-                                                  EmbreeDevice* device = nullptr);
+    /// the scene makes its own. `traced` false: faces only, no Embree scene (for counting them;
+    /// crossings and occlusion must not be asked). Throws qgi::Error on an empty scene or
+    /// non-finite data, naming the entity.
+    static std::unique_ptr<VlfScene>
+    fromRegistry(const Registry& registry, EmbreeDevice* device = nullptr, bool traced = true);
 
     /// Groups `triangles` (their `face` field is ignored) into planar faces by `group`
     /// (triangles of one group with one plane form a face) with `materials[group]`.
@@ -98,10 +99,10 @@ public:
     /// except that a metal of roughness kDiffuseRoughness or more stays diffuse (k_d =
     /// baseColor, no lobe).
     static Material fromComponent(const qgi::Material& material);
-    /// `device` as for fromRegistry(); it must outlive the scene.
+    /// `device` and `traced` as for fromRegistry(); the device must outlive the scene.
     VlfScene(std::vector<Triangle> triangles, const std::vector<std::uint32_t>& group,
              const std::vector<Material>& materials, std::vector<PunctualLight> lights,
-             const glm::vec3& environment, EmbreeDevice* device = nullptr);
+             const glm::vec3& environment, EmbreeDevice* device = nullptr, bool traced = true);
 
     const std::vector<Face>& faces() const { return mFaces; }
     /// The group (fromRegistry: the index into entities()) of each face.
@@ -136,6 +137,9 @@ public:
     Crossing firstHit(const glm::vec3& origin, const glm::vec3& dir, float tMin, float tMax) const;
     /// Whether the open segment between a and b is blocked.
     bool occluded(const glm::vec3& a, const glm::vec3& b) const;
+    /// Whether anything lies along origin + t dir, t in [0, tFar] (dir unit): a ray from a
+    /// point already lifted off its surface, to a light at any distance.
+    bool occluded(const glm::vec3& origin, const glm::vec3& dir, float tFar) const;
 
 private:
     void buildEmbree();

@@ -22,10 +22,9 @@ struct VlfSettings {
     float glossyCutoff = 1e-2f;
     std::uint64_t seed = 1; ///< seeds every jitter choice
     bool progress = false;  ///< log progress lines (info level) during the bake
-    /// Most memory a bake may take (its peak, VlfMemory::bakeBytes), checked before the
-    /// directional tiles and the bake's copies, its large arrays, are allocated (the diffuse
-    /// texel maps, at most 2^32 texels, come first): a bake that needs more fails with the
-    /// figure. 0: half of the
+    /// Most memory a bake may take (its peak, VlfMemory::bakeBytes), checked before its large
+    /// arrays are allocated (the texel maps' share before them, the whole before the tiles): a
+    /// bake that needs more fails with the figure. 0: half of the
     /// machine's physical memory (the rest is the scene's, the GL driver's, the system's; a
     /// container's memory limit is not read: set this below it). Settings within their ranges
     /// can ask for tens of GB (direction level 6 at 256 lines).

@@ -382,6 +382,11 @@ TEST_F(RenderTest, NoPassInheritsTheGlStateItFinds) {
     glPrimitiveRestartIndex(0);
     glPixelStorei(GL_PACK_ALIGNMENT, 8); // and the screenshots' read-back
     glPixelStorei(GL_PACK_ROW_LENGTH, 7);
+    glPixelStorei(GL_PACK_SWAP_BYTES, GL_TRUE);
+    GLuint packBuffer = 0;
+    glCreateBuffers(1, &packBuffer);
+    glNamedBufferData(packBuffer, 1 << 20, nullptr, GL_STREAM_READ);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, packBuffer);
     glClearColor(1.f, 0.f, 0.f, 1.f);
     glClearDepth(0.0);
     glUseProgram(0);
@@ -394,6 +399,7 @@ TEST_F(RenderTest, NoPassInheritsTheGlStateItFinds) {
     EXPECT_TRUE(renderer.readLdr().rgba == ldr.rgba) << "the displayed frame changed";
     glDeleteFramebuffers(1, &foreign);
     glDeleteRenderbuffers(1, &colour);
+    glDeleteBuffers(1, &packBuffer);
 }
 
 TEST_F(RenderTest, MovingMobileRefreshesOnlyItsShadows) {

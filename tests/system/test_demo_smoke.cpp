@@ -593,6 +593,7 @@ TEST(DemoSmoke, TheOverlayDrawsInTheWindowButNeverInScreenshots) {
         "--scene cornell --headless --frames 3 --width 96 --height 64 --photons 2000 --quiet ";
     const RunResult on = runDemo(common + "--overlay on --gl-debug --screenshot " + a);
     ASSERT_EQ(on.exitCode, 0) << on.output;
+    EXPECT_EQ(on.output.find("--overlay on:"), std::string::npos) << "not drawn: " << on.output;
     EXPECT_EQ(on.output.find("error: GL "), std::string::npos) << on.output;
     EXPECT_EQ(on.output.find("warning: GL "), std::string::npos) << on.output;
     ASSERT_EQ(runDemo(common + "--overlay off --screenshot " + b).exitCode, 0);

@@ -345,7 +345,9 @@ TEST(VlfStructure, MemoryIsAccounted) {
     // Rendering keeps RGBA float per cell and RGB float per texel, plus the index.
     EXPECT_GE(mem.renderBytes, mem.tileCells * 16 + texels * 12);
     // The bake adds 56 B per cell (three RGB and two RGBA arrays, one of them a weight) and per
-    // texel unshot and received irradiance plus one copy per work chunk (16 here).
+    // texel unshot and received irradiance plus one copy per work chunk (16 here). This pins
+    // the account to the Baker's arrays as they are; the glossy lobe tables, sized by the
+    // lobes, are left out (ARCHITECTURE.md, VLF memory).
     EXPECT_EQ(mem.bakeBytes - mem.renderBytes, mem.tileCells * 56 + texels * 18 * 12);
 }
 
