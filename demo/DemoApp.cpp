@@ -257,8 +257,9 @@ std::filesystem::path cacheFileOf(const std::string& option, const char* name,
     if (option != "auto") return option;
     std::filesystem::path file = world.ctx().get<SceneInfo>().name + extension;
     if (!mayReplaceWithCache(file, magic)) {
-        logWarning(name, " auto: ", file.string(), " exists and is not ", what,
-                   " file; baking without a cache file");
+        logWarning(name, " auto (the default): ", file.string(), " exists and is not ", what,
+                   " file, so it is left alone and the bake is not kept (", name,
+                   " FILE names another file; none says nothing)");
         file.clear();
     }
     return file;

@@ -29,7 +29,8 @@ struct ShProbeSettings {
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.
     float influenceDistance = 0.f;
     /// A half-spacing cell of the lattice needs this many end points of PhotonDelta segments
-    /// (counted over frames until it marks, then from zero again) before it marks probes: the
+    /// (counted over frames until it marks, then from zero again; counts halve every 32
+    /// frames) before it marks probes: the
     /// scattered later bounces of re-traced
     /// paths change per-vertex irradiance by a photon or two here and there, far below the
     /// estimate's own noise (DETP's default disc holds about 64 photons), and would otherwise

@@ -105,6 +105,7 @@ void ShProbeSystem::build(Registry& registry) {
     mStaleCount = 0;
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
     mFineTouched.clear(); // end points counted from the next delta on
+    mFramesSinceHalving = 0;
     mMobiles.clear();
     registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
         [&](Entity e, const MobileMesh&, const Mesh& mesh, const WorldTransform& world) {
@@ -501,6 +502,13 @@ void ShProbeSystem::markChanges(const Registry& registry) {
     // by its half diagonal so no end point's neighbourhood is missed, and starts counting
     // again. Counts carry over from frame to frame, so changes that trickle in a few end
     // points a frame still mark their probes once they add up.
+    // Counts halve every kEndPointHalfLife frames: stray end points that fall rarer than about
+    // one in 16 frames never add up to a mark.
+    if (!mFineTouched.empty() && ++mFramesSinceHalving >= kEndPointHalfLife) {
+        mFramesSinceHalving = 0;
+        for (std::uint16_t& count : mFineTouched)
+            count = std::uint16_t(count / 2);
+    }
     if (delta && !delta->paths.empty()) {
         const float fine = 0.5f * grid.spacing;
         const glm::ivec3 fineCounts = 2 * grid.counts + 1;

@@ -48,7 +48,7 @@ class RayScene;
  *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments,
  *     old and new, the only places where per-vertex irradiance can have changed, wherever
  *     minDeltaEndPoints of them have fallen in one half-spacing cell (over this and earlier
- *     frames, since the cell last marked);
+ *     frames, since the cell last marked; counts halve every 32 frames);
  *   - near a moved mobile's old or new world bounds (or its bounds, when it was taken out or
  *     put back: MobileMesh::active): within influenceDistance, or as far as
  *     its bounding sphere covers mobileSolidAngleShare of a probe's sphere of directions
@@ -183,8 +183,11 @@ private:
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::uint32_t> mDistance;
     std::vector<std::uint32_t> mQueue;
-    /// Delta end points counted per half-spacing cell since the cell last marked its probes.
+    /// Delta end points counted per half-spacing cell since the cell last marked its probes,
+    /// halved every kEndPointHalfLife frames.
+    static constexpr std::uint32_t kEndPointHalfLife = 32;
     std::vector<std::uint16_t> mFineTouched;
+    std::uint32_t mFramesSinceHalving = 0;
     std::vector<std::uint32_t> mPendingCells;
     std::vector<std::uint8_t> mCellQueued;
     std::vector<Entity> mAvatarEntities;

@@ -47,11 +47,11 @@ inline constexpr std::size_t kMaxLineCrossings = 256;
  *  ways (the thesis's exchange lists, section 4.3.2, in O(crossings) per line). Back faces
  *  block. A line's first crossing facing against it receives the environment.
  *
- *  Order: a direct-light pass for point, spot and directional lights (shadow rays to texel centres
- * and to glossy cells), then `iterations` passes. Each pass, for every subfield (in parallel), for
- *  each jittered direction in its cell: senders emit emission (first pass) + k_d / pi x unshot
- *  irradiance + unshot specular tile radiance; receivers deposit flux L * A_line * dOmega into
- *  their irradiance map and, for specular faces, record the incident radiance in their tiles.
+ *  Order: a direct-light pass for point, spot and directional lights (shadow rays to texel
+ *  centres and to glossy cells), then `iterations` passes. Each pass, for every subfield (in
+ * parallel), for each jittered direction in its cell: senders emit emission (first pass) + k_d / pi
+ * x unshot irradiance + unshot specular tile radiance; receivers deposit flux L * A_line * dOmega
+ * into their irradiance map and, for specular faces, record the incident radiance in their tiles.
  *  Then every specular cell gathers its outgoing radiance: a mirror takes k_s times the
  *  incident light around the mirrored direction (12-tap), a glossy face sums the modified
  *  Phong lobe over the incident subfields. The received irradiance is filtered and becomes

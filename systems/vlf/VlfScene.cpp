@@ -88,9 +88,10 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, Embre
             for (int c = 0; c < 3; ++c)
                 if (vm.diffuse[c] < 0.f || vm.specular[c] < 0.f || vm.emission[c] < 0.f ||
                     vm.diffuse[c] + vm.specular[c] > 1.f + 1e-6f)
-                    fail(who(registry, e), ": Material reflects more than it receives or a ",
-                         "negative share (channel ", c, ": diffuse ", vm.diffuse[c], ", specular ",
-                         vm.specular[c], "); baseColor + specular must lie in [0, 1] per channel");
+                    fail(who(registry, e), ": Material reflects more than it receives or has a ",
+                         "negative part (channel ", c, ": diffuse ", vm.diffuse[c], ", specular ",
+                         vm.specular[c], ", emission ", vm.emission[c],
+                         "); baseColor + specular must lie in [0, 1] and emission be >= 0");
             const std::uint32_t g = std::uint32_t(materials.size());
             materials.push_back(vm);
             entities.push_back(e);

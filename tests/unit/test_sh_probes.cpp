@@ -1125,6 +1125,15 @@ TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
         trickle.system.update(trickle.world, FrameContext{frame});
         EXPECT_EQ(trickle.system.staleCount(), frame < 4 ? 0u : marked) << "frame " << frame;
     }
+
+    // But counts halve every 32 frames: one stray end point every 20 frames never marks.
+    MobileRoom stray(0, 4);
+    PhotonDelta& sometimes = stray.world.ctx().emplace<PhotonDelta>();
+    for (std::uint64_t frame = 1; frame <= 400; ++frame) {
+        sometimes = frame % 20 == 0 ? delta : PhotonDelta{};
+        stray.system.update(stray.world, FrameContext{frame});
+    }
+    EXPECT_EQ(stray.system.staleCount(), 0u);
 }
 
 TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
