@@ -4,11 +4,14 @@
 //    disc index), once; counters: points, darts, AO calls;
 //  - Query: CPU blends at random positions on the points' own surfaces (jittered within
 //    their spacing radius), items = queries;
+//  - Coverage: the share of the shaded surfaces' area no point reaches, by uniform samples;
 //  - UpdateMovingMobile: the `point.cache` frame while the crate in the court moves 5 cm per
 //    frame (the photon update runs untimed before it), at the default budget; counters: delta
 //    segments, points queued and refreshed.
+#include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PointCacheShaded.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
@@ -17,10 +20,13 @@
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/point_cache/PointCacheSystem.h"
+#include "systems/point_cache/PointShading.h"
 
 #include <benchmark/benchmark.h>
 #include <glm/gtc/matrix_transform.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <memory>
 #include <random>
 
@@ -101,6 +107,76 @@ void BM_Query(benchmark::State& state) {
     state.counters["emptyFraction"] = double(empty) / double(state.iterations());
 }
 BENCHMARK(BM_Query);
+
+/// Coverage: positions uniform by area over every surface the cache shades (not only near its
+/// points), each queried once; the share that no point reaches is where the shader falls back
+/// to per-vertex irradiance (a set stopped by its dart budget is not saturated).
+void BM_Coverage(benchmark::State& state) {
+    Atrium& w = atrium();
+    if (!w.cache) {
+        w.cache = std::make_unique<PointCacheSystem>(PointCacheSettings{});
+        w.cache->build(w.registry);
+    }
+    const PointCache& cache = w.registry.ctx().get<PointCache>();
+    struct Triangle {
+        glm::vec3 a, e1, e2, n;
+    };
+    std::vector<Triangle> triangles;
+    std::vector<double> cdf;
+    double area = 0.0;
+    w.registry.view<const PointCacheShaded, const Mesh, const WorldTransform>().each(
+        [&](Entity, const PointCacheShaded&, const Mesh& mesh, const WorldTransform& world) {
+            for (std::size_t i = 0; i + 2 < mesh.indices.size(); i += 3) {
+                glm::vec3 v[3];
+                for (int k = 0; k < 3; ++k)
+                    v[k] = glm::vec3(world.matrix *
+                                     glm::vec4(mesh.positions[mesh.indices[i + k]], 1.f));
+                const glm::vec3 c = glm::cross(v[1] - v[0], v[2] - v[0]);
+                if (!(glm::length(c) > 0.f)) continue;
+                triangles.push_back({v[0], v[1] - v[0], v[2] - v[0], glm::normalize(c)});
+                area += 0.5 * double(glm::length(c));
+                cdf.push_back(area);
+            }
+        });
+    std::mt19937 rng(9);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    constexpr int kSamples = 200000;
+    // Every 50th sample also gets the ceiling panels' direct light (16 shadow rays each): how
+    // much of it falls where no point reaches.
+    const RayScene& rays = w.registry.ctx().get<RayScene>();
+    const std::vector<AreaLight>& lights = w.cache->areaLights();
+    std::size_t empty = 0;
+    double directAll = 0.0, directEmpty = 0.0;
+    for (auto _ : state) {
+        empty = 0;
+        for (int k = 0; k < kSamples; ++k) {
+            const auto it = std::lower_bound(cdf.begin(), cdf.end(), u(rng) * area);
+            const Triangle& t = triangles[std::size_t(it - cdf.begin())];
+            double a = u(rng), b = u(rng);
+            if (a + b > 1.0) a = 1.0 - a, b = 1.0 - b;
+            const glm::vec3 x = t.a + float(a) * t.e1 + float(b) * t.e2;
+            const bool none = cache.sample(x, t.n).count == 0;
+            empty += none;
+            if (k % 50 != 0) continue;
+            double e = 0.0;
+            for (std::uint32_t l = 0; l < lights.size(); ++l) {
+                const glm::vec3 lit =
+                    shadeAreaLight(rays, lights[l], l, x, t.n, 16, 1, std::uint32_t(k)).irradiance;
+                e += double(lit.x + lit.y + lit.z);
+            }
+            directAll += e;
+            if (none) directEmpty += e;
+        }
+    }
+    state.counters["shadedArea"] = area;
+    state.counters["emptyFraction"] = double(empty) / kSamples;
+    // Binomial standard error of that fraction.
+    const double p = double(empty) / kSamples;
+    state.counters["emptyFractionSE"] = std::sqrt(p * (1.0 - p) / kSamples);
+    state.counters["emptyShareOfDirect"] = directAll > 0.0 ? directEmpty / directAll : 0.0;
+    state.counters["directSampled"] = directAll; // sum of RGB irradiance over the subsample
+}
+BENCHMARK(BM_Coverage)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 void BM_UpdateMovingMobile(benchmark::State& state) {
     Atrium& w = atrium();
