@@ -31,7 +31,6 @@
 #include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfScene.h"
 
-#include <epoxy/gl.h>
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 
@@ -453,7 +452,6 @@ int runDemo(const DemoOptions& options) {
             overlayInfo.selected = selected ? entityName(world, selected) : "";
             overlayInfo.lampsOff = controller.lampsOff();
             overlayInfo.pointsShown = frame.renderer() && frame.renderer()->showPointCache();
-            glBindFramebuffer(GL_FRAMEBUFFER, 0);
             overlay->draw(profiler, overlayInfo);
             controller.setMouseTaken(overlay->wantsMouse());
         }

@@ -3,6 +3,7 @@
 #include "runtime/core/Error.h"
 #include "runtime/profile/FrameProfiler.h"
 
+#include <epoxy/gl.h>
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 #include <backends/imgui_impl_glfw.h>
@@ -128,6 +129,7 @@ void Overlay::draw(const FrameProfiler& profiler, const OverlayInfo& info) {
     if (info.pointsShown) ImGui::TextUnformatted("showing the point cache's points");
     ImGui::End();
     ImGui::Render();
+    glBindFramebuffer(GL_FRAMEBUFFER, 0); // over the window's image, whatever the frame bound
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
 }
 

@@ -332,7 +332,8 @@ std::size_t VlfScene::crossings(const glm::vec3& o, const glm::vec3& d, float tM
     return count;
 }
 
-bool VlfScene::occluded(const glm::vec3& origin, const glm::vec3& dir, float tFar) const {
+bool VlfScene::occludedRay(const glm::vec3& origin, const glm::vec3& dir, float tNear,
+                           float tFar) const {
     QGI_ASSERT(mScene.get(), "a VlfScene made without rays is not traced");
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
@@ -343,31 +344,22 @@ bool VlfScene::occluded(const glm::vec3& origin, const glm::vec3& dir, float tFa
     ray.dir_x = dir.x;
     ray.dir_y = dir.y;
     ray.dir_z = dir.z;
-    ray.tnear = 0.f;
+    ray.tnear = tNear;
     ray.tfar = tFar;
     ray.mask = ~0u;
     rtcOccluded1(mScene.get(), &context, &ray);
     return ray.tfar < 0.f;
 }
 
+bool VlfScene::occluded(const glm::vec3& origin, const glm::vec3& dir, float tFar) const {
+    return occludedRay(origin, dir, 0.f, tFar);
+}
+
 bool VlfScene::occluded(const glm::vec3& a, const glm::vec3& b) const {
     const glm::vec3 d = b - a;
     const float len = glm::length(d);
     if (!(len > 0.f)) return false;
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    RTCRay ray{};
-    ray.org_x = a.x;
-    ray.org_y = a.y;
-    ray.org_z = a.z;
-    ray.dir_x = d.x / len;
-    ray.dir_y = d.y / len;
-    ray.dir_z = d.z / len;
-    ray.tnear = 1e-4f * len;
-    ray.tfar = len * (1.f - 1e-4f);
-    ray.mask = ~0u;
-    rtcOccluded1(mScene.get(), &context, &ray);
-    return ray.tfar < 0.f;
+    return occludedRay(a, d / len, 1e-4f * len, len * (1.f - 1e-4f));
 }
 
 } // namespace qgi::vlf

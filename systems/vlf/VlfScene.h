@@ -143,6 +143,7 @@ public:
 
 private:
     void buildEmbree();
+    bool occludedRay(const glm::vec3& origin, const glm::vec3& dir, float tNear, float tFar) const;
 
     std::vector<Triangle> mTriangles;
     std::vector<Face> mFaces;

@@ -51,6 +51,14 @@ struct Atrium {
             });
         rest = registry.get<WorldTransform>(crate).matrix;
     }
+    /// The cache at its default settings, built the first time it is asked for.
+    const PointCache& builtCache() {
+        if (!cache) {
+            cache = std::make_unique<PointCacheSystem>(PointCacheSettings{});
+            cache->build(registry);
+        }
+        return registry.ctx().get<PointCache>();
+    }
 };
 
 Atrium& atrium() {
@@ -77,11 +85,7 @@ BENCHMARK(BM_Build)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 void BM_Query(benchmark::State& state) {
     Atrium& w = atrium();
-    if (!w.cache) {
-        w.cache = std::make_unique<PointCacheSystem>(PointCacheSettings{});
-        w.cache->build(w.registry);
-    }
-    const PointCache& cache = w.registry.ctx().get<PointCache>();
+    const PointCache& cache = w.builtCache();
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(-1.f, 1.f);
     std::vector<glm::vec3> xs, ns;
@@ -113,11 +117,7 @@ BENCHMARK(BM_Query);
 /// to per-vertex irradiance (a set stopped by its dart budget is not saturated).
 void BM_Coverage(benchmark::State& state) {
     Atrium& w = atrium();
-    if (!w.cache) {
-        w.cache = std::make_unique<PointCacheSystem>(PointCacheSettings{});
-        w.cache->build(w.registry);
-    }
-    const PointCache& cache = w.registry.ctx().get<PointCache>();
+    const PointCache& cache = w.builtCache();
     struct Triangle {
         glm::vec3 a, e1, e2, n;
     };
@@ -180,10 +180,7 @@ BENCHMARK(BM_Coverage)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 void BM_UpdateMovingMobile(benchmark::State& state) {
     Atrium& w = atrium();
-    if (!w.cache) {
-        w.cache = std::make_unique<PointCacheSystem>(PointCacheSettings{});
-        w.cache->build(w.registry);
-    }
+    w.builtCache();
     if (!w.photons) {
         w.photons = std::make_unique<PhotonUpdateSystem>(PhotonSettings{});
         w.photons->update(w.registry, FrameContext{w.frame, 0.0, 0.f, 0});

@@ -50,6 +50,27 @@ Material emitter(float L) {
     return m;
 }
 
+/// Bakes the world's VLF (no cache file) at a small resolution.
+void bakeField(Registry& world, int level, int lines, int tile, int iterations) {
+    VlfSystemSettings vs;
+    vs.bake.directionLevel = level;
+    vs.bake.linesPerSide = lines;
+    vs.bake.tileSize = tile;
+    vs.bake.iterations = iterations;
+    VlfSystem(vs).build(world);
+}
+
+/// One frame of the world at kSize x kSize in `mode`, its linear radiance.
+ImageF renderFrame(Registry& world, ShadingMode mode) {
+    RenderSettings rs;
+    rs.width = kSize;
+    rs.height = kSize;
+    rs.mode = mode;
+    RenderSystem renderer(rs);
+    renderer.update(world, FrameContext{});
+    return renderer.readHdr();
+}
+
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
     QGI_SKIP_WITHOUT_GL();
     GlWindow window(test::testWindow(kSize, kSize, "qgi test_render_vlf"));
@@ -74,22 +95,12 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
             glm::inverse(glm::lookAt(eye, glm::vec3(-0.1f, 0.f, -0.2f), glm::vec3(0, 0, -1)));
         world.emplace<WorldTransform>(cam, WorldTransform{pose});
 
-        VlfSystemSettings vs;
-        vs.bake.directionLevel = 3;
-        vs.bake.linesPerSide = 32;
-        vs.bake.tileSize = 8;
-        vs.bake.iterations = 2;
-        VlfSystem(vs).build(world);
+        bakeField(world, 3, 32, 8, 2);
         const VlfField& field = world.ctx().get<VlfField>();
         ASSERT_EQ(field.vlf.specularFaceCount(), 1u);
 
-        RenderSettings rs;
-        rs.width = kSize;
-        rs.height = kSize;
-        rs.mode = ShadingMode::Photon; // no direct light: the mirror shows the VLF alone
-        RenderSystem renderer(rs);
-        renderer.update(world, FrameContext{});
-        const ImageF hdr = renderer.readHdr();
+        // Photon mode, no direct light: the mirror shows the VLF alone.
+        const ImageF hdr = renderFrame(world, ShadingMode::Photon);
 
         // The pixel rays (square image) in double from the camera's float pose: their rounding
         // is far below the GPU's.
@@ -213,21 +224,10 @@ TEST(RenderVlf, AGlossyMetalIsDrawnWithItsDiffusePartOnly) {
             cam, WorldTransform{glm::inverse(glm::lookAt(glm::vec3(0.f, 1.5f, 0.f), glm::vec3(0.f),
                                                          glm::vec3(0, 0, -1)))}); // +x: right
 
-        VlfSystemSettings vs;
-        vs.bake.directionLevel = 2;
-        vs.bake.linesPerSide = 16;
-        vs.bake.tileSize = 4;
-        vs.bake.iterations = 1;
-        VlfSystem(vs).build(world);
+        bakeField(world, 2, 16, 4, 1);
         ASSERT_EQ(world.ctx().get<VlfField>().vlf.specularFaceCount(), 1u); // the polished half
 
-        RenderSettings rs;
-        rs.width = kSize;
-        rs.height = kSize;
-        rs.mode = ShadingMode::Photon;
-        RenderSystem renderer(rs);
-        renderer.update(world, FrameContext{});
-        const ImageF hdr = renderer.readHdr();
+        const ImageF hdr = renderFrame(world, ShadingMode::Photon);
         // Pixels well inside either half (the floor spans about +-0.97 of the view).
         int checked = 0;
         for (int y = kSize / 8; y < kSize - kSize / 8; ++y)

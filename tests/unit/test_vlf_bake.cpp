@@ -118,6 +118,21 @@ glm::vec3 cellCentreLine(const Vlf& v, std::size_t psf, int i, int j) {
     return v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
 }
 
+/// The settings of the emitter-over-floor bakes: one iteration, no filter, texels two line
+/// cells wide, `jitterSamples` jittered directions per subfield.
+VlfSettings floorBake(int level, int jitterSamples, std::uint64_t seed) {
+    VlfSettings s;
+    s.directionLevel = level;
+    s.linesPerSide = 64;
+    s.tileSize = 8;
+    s.iterations = 1;
+    s.jitterSamples = jitterSamples;
+    s.texelCells = 2.f;
+    s.filterSigma = 0.f;
+    s.seed = seed;
+    return s;
+}
+
 } // namespace
 
 TEST(VlfBake, CrossingsAlternateInAClosedScene) {
@@ -258,16 +273,7 @@ TEST(VlfBake, DiffusePointUnderARectangularEmitter) {
     std::vector<std::vector<double>> values(probes.size());
     std::vector<double> truth(probes.size());
     for (int seed = 1; seed <= seeds; ++seed) {
-        VlfSettings s;
-        s.directionLevel = 3;
-        s.linesPerSide = 64;
-        s.tileSize = 8;
-        s.iterations = 1;
-        s.jitterSamples = 4;
-        s.texelCells = 2.f;
-        s.filterSigma = 0.f;
-        s.seed = std::uint64_t(seed);
-        const Vlf v = bakeVlf(*scene, s);
+        const Vlf v = bakeVlf(*scene, floorBake(3, 4, std::uint64_t(seed)));
         const FaceMap& m = v.faceMaps()[std::size_t(floor)];
         for (std::size_t p = 0; p < probes.size(); ++p) {
             const glm::vec3 x(probes[p].x, 0.f, probes[p].y);
@@ -303,16 +309,7 @@ TEST(VlfBake, DiffuseErrorFallsAsDirectionsGrow) {
     for (int level = 1; level <= 4; ++level) {
         std::vector<double> values;
         for (int seed = 1; seed <= kSeeds; ++seed) {
-            VlfSettings s;
-            s.directionLevel = level;
-            s.linesPerSide = 64;
-            s.tileSize = 8;
-            s.iterations = 1;
-            s.jitterSamples = 1;
-            s.texelCells = 2.f;
-            s.filterSigma = 0.f;
-            s.seed = std::uint64_t(seed);
-            const Vlf v = bakeVlf(*scene, s);
+            const Vlf v = bakeVlf(*scene, floorBake(level, 1, std::uint64_t(seed)));
             const FaceMap& m = v.faceMaps()[std::size_t(floor)];
             double err2 = 0;
             int n = 0;
