@@ -296,7 +296,8 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
         mLeavesFrom.push_back(leavingSkippedFrom(r));
     // One query and one walk for all of them: a path near several mobiles is read once.
     std::span<const std::uint32_t> candidates;
-    if (const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>()) {
+    const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>();
+    if (grid && grid->indexes(store)) {
         grid->pathsOverlapping(mMobileBoxes, mCandidatePaths);
         candidates = mCandidatePaths;
     } else {

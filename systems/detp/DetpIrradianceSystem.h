@@ -40,7 +40,8 @@ struct PhotonSegments;
  *   - the vertices of a mobile that moved (its WorldTransform changed, or it is in
  *     PhotonDelta::movedMobiles) are re-estimated in full at the new pose from the segments of
  *     the paths the PhotonPathGrid finds near the mobile, so the whole ray set is never
- *     scanned. Without a PhotonPathGrid resource every stored path is a candidate;
+ *     scanned. Without a PhotonPathGrid resource that indexes the current ray set (none is
+ *     built with PhotonSettings::fullRecompute) every stored path is a candidate;
  *   - a mobile taken out of the light (MobileMesh::active) holds zero until it is put back,
  *     which re-estimates it like a move. The same holds for the comparison estimators.
  *  A segment that starts on a convex mobile (ReceiverSet::Receiver::convex) is not traced

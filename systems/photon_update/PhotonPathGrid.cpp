@@ -202,6 +202,19 @@ void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::ui
     mChanged.clear();
     mChangedExtent.clear();
     mSeen.assign((mPathCount + 63) / 64, 0);
+    mBuilt = true;
+    mGeneration = store.generation;
+}
+
+void PhotonPathGrid::clear() {
+    mBuilt = false;
+    mPathCount = 0;
+    mChunks = {};
+    mChangedSlot = {};
+    mChanged = {};
+    mChangedExtent = {};
+    mSeen = {};
+    mMarks.clear();
 }
 
 PhotonPathGrid::Extent PhotonPathGrid::extentOf(const PhotonStore& store, std::uint32_t p) const {

@@ -44,6 +44,16 @@ public:
     /// axis. Parallel.
     void build(const PhotonStore& store, const Aabb& bounds, std::uint32_t resolution);
 
+    /// Empties the grid and frees its memory: it then indexes no store (indexes() is false).
+    void clear();
+
+    /// Whether the grid indexes `store`'s current ray set: built from it since its last full
+    /// shot (PhotonStore::generation), and kept up to date since. A consumer that finds it
+    /// false must treat every path as a candidate.
+    bool indexes(const PhotonStore& store) const {
+        return mBuilt && mGeneration == store.generation && mPathCount == store.pathCount();
+    }
+
     /// Marks `paths` changed (their segments in `store` are new): until their chunk is
     /// re-indexed, queries test them by the bounding box of their current segments.
     void markChanged(const PhotonStore& store, std::span<const std::uint32_t> paths);
@@ -121,6 +131,8 @@ private:
 
     static constexpr std::uint32_t kUnchanged = 0xffffffffu;
 
+    bool mBuilt = false;
+    std::uint64_t mGeneration = 0; ///< PhotonStore::generation of the store it indexes
     Aabb mBounds;
     glm::ivec3 mCells{0};
     float mCellSize = 1.f;

@@ -461,13 +461,16 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         store.paths[i].count = std::uint16_t(mEnds[i + 1] - mEnds[i]);
     }
     const std::size_t traced = store.segments.size();
-    if (mSettings.fullRecompute) { // re-shot every frame: no room for re-traced paths needed
+    mReshooting.assign((store.paths.size() + 63) / 64, 0);
+    if (mSettings.fullRecompute) {
+        // Re-shot every frame: no room for re-traced paths, and no index of paths to find
+        // them by (building it would cost more than the frame's tracing).
         mSpace.clear();
+        grid.clear();
     } else {
         mSpace.layOut(store, double(mSettings.compactionFraction));
+        grid.build(store, mSceneBox, mSettings.gridResolution);
     }
-    mReshooting.assign((store.paths.size() + 63) / 64, 0);
-    grid.build(store, mSceneBox, mSettings.gridResolution);
     mStats.tracedSegments = traced;
     mStats.reindexedPaths = store.paths.size();
     if (!mLoggedShot) { // --full-recompute shoots every frame: once is enough

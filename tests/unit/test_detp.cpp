@@ -906,6 +906,29 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     const auto& fromAll = registry.get<VertexIrradiance>(plate).irradiance;
     ASSERT_EQ(fromGrid.size(), fromAll.size());
     EXPECT_EQ(std::memcmp(fromGrid.data(), fromAll.data(), fromAll.size() * sizeof(glm::vec3)), 0);
+
+    // A grid that does not index the current ray set is not asked: one built before the last
+    // full shot (its paths may all have changed since), or one left empty (as the photon update
+    // leaves it with PhotonSettings::fullRecompute).
+    PhotonPathGrid& stale = registry.ctx().emplace<PhotonPathGrid>();
+    stale.build(store, Aabb{{0.f, 0.f, 0.f}, {4.f, 2.f, 4.f}}, 32);
+    ++store.generation;
+    EXPECT_FALSE(stale.indexes(store));
+    DetpIrradianceSystem afterShot(settings);
+    afterShot.build(registry);
+    afterShot.update(registry, {});
+    EXPECT_EQ(afterShot.lastFrame().candidatePaths, store.pathCount());
+    stale.build(store, Aabb{{0.f, 0.f, 0.f}, {4.f, 2.f, 4.f}}, 32);
+    EXPECT_TRUE(stale.indexes(store));
+    stale.clear();
+    EXPECT_FALSE(stale.indexes(store));
+    DetpIrradianceSystem afterClear(settings);
+    afterClear.build(registry);
+    afterClear.update(registry, {});
+    EXPECT_EQ(afterClear.lastFrame().candidatePaths, store.pathCount());
+    const auto& fromAllAgain = registry.get<VertexIrradiance>(plate).irradiance;
+    EXPECT_EQ(std::memcmp(fromGrid.data(), fromAllAgain.data(), fromAll.size() * sizeof(glm::vec3)),
+              0);
 }
 
 /// A closed cube of side 2 half centred on the origin, each face its own n x n grid facing out

@@ -795,6 +795,11 @@ TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
         ASSERT_TRUE(sameStore(storeOf(incremental), storeOf(baseline))) << "frame " << frame;
     }
     EXPECT_EQ(storeOf(baseline).generation, generation + 10);
+    // The baseline never builds the index of paths it has no use for; the incremental update
+    // keeps its own up to date.
+    EXPECT_FALSE(baseline.ctx().get<PhotonPathGrid>().indexes(storeOf(baseline)));
+    EXPECT_EQ(baseline.ctx().get<PhotonPathGrid>().entryCount(), 0u);
+    EXPECT_TRUE(incremental.ctx().get<PhotonPathGrid>().indexes(storeOf(incremental)));
 }
 
 /// The landing rule (PhotonSettings::reuseLandedPaths), by brute force, for a segment that hit
