@@ -147,27 +147,32 @@ void PhotonPathGrid::forEachCell(const PhotonSegments& segments, std::size_t fir
 void PhotonPathGrid::indexChunk(const PhotonStore& store, Chunk& chunk) const {
     Marks& marks = localMarks();
     const std::size_t cells = cellCount() + kSideCells;
-    // Calls fn(cell) once for each distinct cell of path p.
-    const auto walkPath = [&](std::uint32_t p, auto&& fn) {
+    // One walk per path: its distinct cells, counted per cell and recorded in path order; the
+    // lists are then filled from the record (walking the segments again cost a third of a build).
+    chunk.offsets.assign(cells + 1, 0);
+    marks.pathCells.clear();
+    marks.pathEnds.clear();
+    for (std::uint32_t p = chunk.first; p < chunk.end; ++p) {
         const std::uint32_t token = marks.nextToken();
         const PhotonPath& path = store.paths[p];
         forEachCell(store.segments, path.first, path.count, [&](std::uint32_t cell) {
             if (marks.mark[cell] == token) return;
             marks.mark[cell] = token;
-            fn(cell);
+            ++chunk.offsets[cell + 1];
+            marks.pathCells.push_back(cell);
         });
-    };
-    chunk.offsets.assign(cells + 1, 0);
-    for (std::uint32_t p = chunk.first; p < chunk.end; ++p)
-        walkPath(p, [&](std::uint32_t cell) { ++chunk.offsets[cell + 1]; });
+        marks.pathEnds.push_back(std::uint32_t(marks.pathCells.size()));
+    }
     for (std::size_t c = 0; c < cells; ++c)
         chunk.offsets[c + 1] += chunk.offsets[c];
     marks.cursor.assign(chunk.offsets.begin(), chunk.offsets.end() - 1);
     const std::size_t entries = chunk.offsets[cells];
     if (entries > chunk.ids.capacity()) chunk.ids.reserve(entries + entries / 8); // not 2x
     chunk.ids.resize(entries);
+    std::size_t k = 0;
     for (std::uint32_t p = chunk.first; p < chunk.end; ++p)
-        walkPath(p, [&](std::uint32_t cell) { chunk.ids[marks.cursor[cell]++] = p; });
+        for (const std::size_t end = marks.pathEnds[p - chunk.first]; k < end; ++k)
+            chunk.ids[marks.cursor[marks.pathCells[k]]++] = p;
 }
 
 void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::uint32_t resolution) {
@@ -379,7 +384,9 @@ std::size_t PhotonPathGrid::memoryBytes() const {
     for (const Chunk& chunk : mChunks)
         bytes += (chunk.offsets.capacity() + chunk.ids.capacity()) * sizeof(std::uint32_t);
     for (const Marks& marks : mMarks)
-        bytes += (marks.mark.capacity() + marks.cursor.capacity()) * sizeof(std::uint32_t);
+        bytes += (marks.mark.capacity() + marks.cursor.capacity() + marks.pathCells.capacity() +
+                  marks.pathEnds.capacity()) *
+                 sizeof(std::uint32_t);
     return bytes;
 }
 

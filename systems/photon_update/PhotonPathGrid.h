@@ -36,8 +36,8 @@ namespace qgi {
  *
  *  Memory: 4 bytes per (path, cell) entry; 4 bytes per cell and chunk (chunks are sized so
  *  that this stays below 64 MiB); 32 bytes per changed path and 4 per path; one bit per path
- *  and 4 bytes per cell and thread of working marks. Queries are thread safe (they serialise
- *  on a mutex); build, markChanged and refresh are not.                                      */
+ *  and, per thread, 4 bytes per cell of working marks and 4 per entry of the chunk it indexes.
+ * Queries are thread safe (they serialise on a mutex); build, markChanged and refresh are not. */
 class PhotonPathGrid {
 public:
     /// Indexes every path of `store` over `bounds` with `resolution` cells along its longest
@@ -90,6 +90,8 @@ private:
     struct Marks {
         std::vector<std::uint32_t> mark; ///< per cell: token of the last path that saw it
         std::vector<std::uint32_t> cursor;
+        /// indexChunk: each path's distinct cells in path order, and where each path's end.
+        std::vector<std::uint32_t> pathCells, pathEnds;
         std::uint32_t token = 0;
         std::uint32_t nextToken();
     };

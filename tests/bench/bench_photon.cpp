@@ -12,6 +12,8 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
+//  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
+//    it), at the default resolution.
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
 //    re-shot within the budget), mean and worst; against FullReshoot, what a switch cost when
 //    it shot every photon anew.
@@ -245,6 +247,25 @@ void reportFrames(benchmark::State& state, const PhotonWorld& w, double retraced
         double(w.registry.ctx().get<PhotonPathGrid>().memoryBytes()) / (1 << 20);
 }
 
+/// The path grid built from the whole shot ray set, as every full shot builds it (the first
+/// frame, a light added or removed): over the scene's bounds at the default resolution.
+void BM_GridBuild(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    const Aabb bounds = w.registry.ctx().get<SceneInfo>().bounds;
+    const std::uint32_t resolution = PhotonSettings{}.gridResolution;
+    PhotonPathGrid grid;
+    for (auto _ : state)
+        grid.build(w.store(), bounds, resolution);
+    if (!grid.indexes(w.store()) || grid.entryCount() == 0) state.SkipWithError("nothing indexed");
+    state.counters["paths"] = double(w.store().pathCount());
+    double segments = 0; // live ones (the store has room for re-traced paths too)
+    for (const PhotonPath& path : w.store().paths)
+        segments += path.count;
+    state.counters["segments"] = segments;
+    state.counters["entries"] = double(grid.entryCount());
+    state.counters["grid_MiB"] = double(grid.memoryBytes()) / (1 << 20);
+}
+
 void BM_MobileToggle(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     double retraced = 0, candidates = 0, segments = 0, photons = 0, detp = 0;
@@ -385,6 +406,9 @@ int main(int argc, char** argv) {
             ->Arg(16)
             ->Arg(32)
             ->Arg(48)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("GridBuild").c_str(), BM_GridBuild, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         // Every mobile taken out of the world and put back on alternate frames.
