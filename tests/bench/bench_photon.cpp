@@ -12,6 +12,8 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
+//  - FullShot/<scene>: a frame that re-shoots every photon in play (a surface's albedo edited;
+//    a light added or removed costs the same), path grid and full estimate included.
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
 //    it), at the default resolution.
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
@@ -22,6 +24,7 @@
 #include "components/MobileMesh.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
+#include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
@@ -266,6 +269,36 @@ void BM_GridBuild(benchmark::State& state, const std::string& name) {
     state.counters["grid_MiB"] = double(grid.memoryBytes()) / (1 << 20);
 }
 
+/// A full shot in play (not --full-recompute): what a light added or removed, or a surface's
+/// albedo edited, costs in the frame it happens. Each iteration edits one static mesh's albedo
+/// (a thousandth darker, then back), and the frame re-shoots every photon, rebuilds the path
+/// grid and re-estimates every vertex.
+void BM_FullShot(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    Registry& r = w.registry;
+    Entity edited;
+    for (const Entity e : r.view<const StaticMesh, const Material>().entities())
+        if (r.get<Material>(e).baseColor != glm::vec3(0.f)) {
+            edited = e;
+            break;
+        }
+    const glm::vec3 albedo = r.get<Material>(edited).baseColor;
+    bool darker = false;
+    std::size_t fullFrames = 0;
+    for (auto _ : state) {
+        darker = !darker;
+        r.patch<Material>(edited).baseColor = darker ? 0.999f * albedo : albedo;
+        w.still();
+        fullFrames += w.system->lastFrame().full ? 1 : 0;
+    }
+    if (darker) { // leave the world as it was for the benchmarks after this one
+        r.patch<Material>(edited).baseColor = albedo;
+        w.still();
+    }
+    if (fullFrames != std::size_t(state.iterations()))
+        state.SkipWithError("a frame was not a full shot");
+}
+
 void BM_MobileToggle(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     double retraced = 0, candidates = 0, segments = 0, photons = 0, detp = 0;
@@ -406,6 +439,9 @@ int main(int argc, char** argv) {
             ->Arg(16)
             ->Arg(32)
             ->Arg(48)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("FullShot").c_str(), BM_FullShot, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark(id("GridBuild").c_str(), BM_GridBuild, scene)
