@@ -214,11 +214,13 @@ void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::ui
 void PhotonPathGrid::clear() {
     mBuilt = false;
     mPathCount = 0;
-    mChunks = {};
-    mChangedSlot = {};
-    mChanged = {};
-    mChangedExtent = {};
-    mSeen = {};
+    // Assigning empty vectors (not clearing them) hands their memory back.
+    mChunks = std::vector<Chunk>();
+    mChangedSlot = std::vector<std::uint32_t>();
+    mChanged = std::vector<std::uint32_t>();
+    mChangedExtent = std::vector<Extent>();
+    mSeen = std::vector<std::uint64_t>();
+    mPicked = std::vector<std::uint32_t>();
     mMarks.clear();
 }
 

@@ -48,8 +48,9 @@ public:
     void clear();
 
     /// Whether the grid indexes `store`'s current ray set: built from it since its last full
-    /// shot (PhotonStore::generation), and kept up to date since. A consumer that finds it
-    /// false must treat every path as a candidate.
+    /// shot (PhotonStore::generation), and kept up to date since (markChanged: the photon
+    /// update, the store's only writer, reports every path it changes). A consumer that finds
+    /// it false must treat every path as a candidate.
     bool indexes(const PhotonStore& store) const {
         return mBuilt && mGeneration == store.generation && mPathCount == store.pathCount();
     }

@@ -922,6 +922,7 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     EXPECT_TRUE(stale.indexes(store));
     stale.clear();
     EXPECT_FALSE(stale.indexes(store));
+    EXPECT_EQ(stale.memoryBytes(), 0u); // all of it handed back
     DetpIrradianceSystem afterClear(settings);
     afterClear.build(registry);
     afterClear.update(registry, {});

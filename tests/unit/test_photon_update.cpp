@@ -795,8 +795,8 @@ TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
         ASSERT_TRUE(sameStore(storeOf(incremental), storeOf(baseline))) << "frame " << frame;
     }
     EXPECT_EQ(storeOf(baseline).generation, generation + 10);
-    // The baseline never builds the index of paths it has no use for; the incremental update
-    // keeps its own up to date.
+    // The baseline never builds the index of paths (it would cost more than it saves there);
+    // the incremental update keeps its own up to date.
     EXPECT_FALSE(baseline.ctx().get<PhotonPathGrid>().indexes(storeOf(baseline)));
     EXPECT_EQ(baseline.ctx().get<PhotonPathGrid>().entryCount(), 0u);
     EXPECT_TRUE(incremental.ctx().get<PhotonPathGrid>().indexes(storeOf(incremental)));

@@ -406,7 +406,8 @@ TEST(VlfBake, MirrorLightReachesADiffuseFloor) {
     // mirror (k_s = 0.6) that emits nothing. The mirror sees emitters in every direction, so it
     // reflects 0.6 everywhere, and after two passes (emission, then what the mirror reflects)
     // a floor point x receives E(x) = pi (1 - F(x)) + 0.6 pi F(x), F(x) its form factor to the
-    // mirror. The floor's own reflection (albedo 0.5) needs a third pass to come back.
+    // mirror. The floor's own reflection (albedo 0.5) never comes back: what meets the upright
+    // mirror keeps rising, and every other face absorbs.
     test::VlfSceneBuilder b;
     const float ks = 0.6f;
     const std::uint32_t mirror = b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(ks), 0.f);
@@ -464,8 +465,9 @@ TEST(VlfBake, MirrorLightReachesADiffuseFloor) {
         const auto [mean, se] = sampleMean(values[p]);
         // Student t, 7 degrees of freedom: |t| > 5.4 has probability < 1e-3.
         EXPECT_NEAR(mean, truth[p], 5.4 * se + 1e-5 * truth[p]) << "probe " << p;
-        // Where the mirror's share is large, losing it (or most of it) would be far outside
-        // that bound.
+        // Where the mirror's share is large, losing it would be far outside that bound (a
+        // fifth of it already fails at the nearest point; finer errors in k_s need more seeds
+        // than a unit test can afford).
         if (p < 3) {
             EXPECT_GT(truth[p] - withoutMirror[p], 2.0 * 5.4 * se) << "probe " << p;
         }
