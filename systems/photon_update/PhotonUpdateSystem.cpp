@@ -464,7 +464,8 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     mReshooting.assign((store.paths.size() + 63) / 64, 0);
     if (mSettings.fullRecompute) {
         // Re-shot every frame: no room for re-traced paths, and no index of paths to find
-        // them by (building it would cost more than the frame's tracing).
+        // them by (building it would cost 0.4 to 1.3 times the frame's tracing, for a few per
+        // cent of DETP's full estimate).
         mSpace.clear();
         grid.clear();
     } else {
