@@ -61,6 +61,18 @@ glm::vec3 albedoOf(const Material* material) {
     return out;
 }
 
+/// The albedo photons reflect off `e`, with a warning when its baseColor is not one.
+glm::vec3 tracedAlbedo(const Registry& registry, Entity e) {
+    const Material* material = registry.tryGet<Material>(e);
+    const glm::vec3 albedo = albedoOf(material);
+    if (material && albedo != material->baseColor) // NaN never compares equal
+        logWarning("photons: Material.baseColor of ", entityName(registry, e), " is (",
+                   material->baseColor.x, ", ", material->baseColor.y, ", ", material->baseColor.z,
+                   "), not an albedo in [0, 1]; photons reflect (", albedo.x, ", ", albedo.y, ", ",
+                   albedo.z, ")");
+    return albedo;
+}
+
 bool isTraced(const Registry& registry, Entity e) {
     return registry.has<StaticMesh>(e) || registry.has<MobileMesh>(e);
 }
@@ -209,9 +221,11 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
 
     mSources.clear();
     findEmitterSources(registry, mSettings, mSources, mEmitters);
-    if (mShot) findMovedMobiles(registry, *scene, delta);
-    if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store) ||
-        albedoChanged(registry)) {
+    if (mShot) {
+        findMovedMobiles(registry, *scene, delta);
+        findAlbedoEdits(registry); // a full shot below reads every albedo anew anyway
+    }
+    if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store)) {
         shootAll(registry, *scene, store, grid);
         delta.full = true;
         return;
@@ -332,11 +346,28 @@ bool PhotonUpdateSystem::litByDirectionalLight() const {
     });
 }
 
-bool PhotonUpdateSystem::albedoChanged(const Registry& registry) const {
+void PhotonUpdateSystem::findAlbedoEdits(const Registry& registry) {
+    mEdits.clear();
     for (const Entity e : registry.changed<Material>()) {
         if (e.index >= mAlbedo.size() || !registry.alive(e) || !isTraced(registry, e)) continue;
-        if (albedoOf(registry.tryGet<Material>(e)) != mAlbedo[e.index]) return true;
+        if (edited(e) || albedoOf(registry.tryGet<Material>(e)) == mAlbedo[e.index]) continue;
+        mAlbedo[e.index] = tracedAlbedo(registry, e);
+        // Where its surface is now: the hits recorded on it lie there (a mobile's paths were
+        // re-traced at each move, and one that moved this frame has its old box queried too).
+        Aabb box;
+        const Mesh* mesh = registry.tryGet<Mesh>(e);
+        const WorldTransform* world = registry.tryGet<WorldTransform>(e);
+        if (mesh && world)
+            for (const glm::vec3& p : mesh->positions)
+                box.extend(glm::vec3(world->matrix * glm::vec4(p, 1.f)));
+        mEdits.push_back({e, box.empty() ? box : widened(box)});
     }
+    mStats.editedSurfaces = mEdits.size();
+}
+
+bool PhotonUpdateSystem::edited(Entity e) const {
+    for (const AlbedoEdit& edit : mEdits)
+        if (edit.entity == e) return true;
     return false;
 }
 
@@ -428,13 +459,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
     registry.view<const Mesh>().each([&](Entity e, const Mesh&) {
         if (!isTraced(registry, e)) return;
         if (e.index >= mAlbedo.size()) mAlbedo.resize(e.index + 1, glm::vec3(0.f));
-        const Material* material = registry.tryGet<Material>(e);
-        mAlbedo[e.index] = albedoOf(material);
-        if (material && mAlbedo[e.index] != material->baseColor) // NaN never compares equal
-            logWarning("photons: Material.baseColor of ", entityName(registry, e), " is (",
-                       material->baseColor.x, ", ", material->baseColor.y, ", ",
-                       material->baseColor.z, "), not an albedo in [0, 1]; photons reflect (",
-                       mAlbedo[e.index].x, ", ", mAlbedo[e.index].y, ", ", mAlbedo[e.index].z, ")");
+        mAlbedo[e.index] = tracedAlbedo(registry, e);
     });
 
     store.lights.clear();
@@ -555,7 +580,7 @@ void PhotonUpdateSystem::scheduleReshoots() {
 
 void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonStore& store,
                                            const PhotonPathGrid& grid) {
-    if (mMoved.empty()) {
+    if (mMoved.empty() && mEdits.empty()) {
         for (const Job& job : mJobs)
             setBit(mReshooting, job.path, false);
         return;
@@ -564,6 +589,8 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     for (const MovedMobile& m : mMoved)
         for (const Aabb& box : {m.oldBox, m.newBox})
             if (!box.empty()) mQueryBoxes.push_back(box);
+    for (const AlbedoEdit& edit : mEdits)
+        if (!edit.box.empty()) mQueryBoxes.push_back(edit.box);
     grid.pathsOverlapping(mQueryBoxes, mCandidates);
     mFirstAffected.resize(mCandidates.size());
 
@@ -606,6 +633,8 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
         const std::size_t s = std::size_t(path.first) + k;
         for (const MovedMobile& m : mMoved)
             if (segments.hitEntity[s] == m.entity) return std::int32_t(k);
+        // Same ray, same hit; what changed is how the photon leaves the surface.
+        if (!mEdits.empty() && edited(segments.hitEntity[s])) return std::int32_t(k);
         const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
         const float length = segments.length[s];
@@ -672,6 +701,7 @@ std::int32_t PhotonUpdateSystem::firstToRetrace(const RayScene& scene, const Pho
     // One affected segment after another, while each lands where it did.
     while (k >= 0) {
         const std::size_t s = store.segmentIndex(p, std::uint32_t(k));
+        if (!mEdits.empty() && edited(segments.hitEntity[s])) break; // it reflects differently
         const MovedMobile* mobile = mayLand(segments, s, tolerance);
         if (!mobile) break;
         ++scratch.checked;

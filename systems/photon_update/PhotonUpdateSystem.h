@@ -31,8 +31,7 @@ class PhotonPathGrid;
  *  Full shot (first frame; a light added or removed; a light whose power drifted since the
  *  last full shot until its photon count is 4x above or below its share of the lit lights'
  *  photons (a share of one photon or more), which includes one lighting up without photons;
- *  an emissive surface gaining or losing its light stand-in; a surface's albedo edited; every
- *  frame with fullRecompute):
+ *  an emissive surface gaining or losing its light stand-in; every frame with fullRecompute):
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built (not with fullRecompute: it would cost more than it saves there, 0.4 to 1.3 times
  *  the tracing against a few per cent of DETP's full estimate; it is left empty,
@@ -52,6 +51,12 @@ class PhotonPathGrid;
  *     the delta as a PhotonRelabel when it lands on another triangle of the plane; the kept
  *     paths then equal a fresh shot's up to that tolerance, not bit for bit. Off: the seed's
  *     rule, and the store stays bit-identical to a fresh shot.
+ *   - Surfaces whose albedo was edited (Material::baseColor patched): the paths with a segment
+ *     that hit one are re-traced from that segment (the same ray lands where it did and
+ *     reflects with the new albedo), so the store is a fresh shot's with the new albedo, bit
+ *     for bit. Candidates come from the path grid over the surface's world bounds. The cost
+ *     grows with the paths that hit it: a pillar is cheap, the floor of a room costs about a
+ *     full shot.
  *   - Lights that moved or changed: their own photons are re-shot with the same indices,
  *     reshootBudget photons per frame in all (shared evenly among such lights), oldest first,
  *     until each has been re-shot once since its last change; the delta reports each one with
@@ -85,6 +90,7 @@ public:
     struct FrameStats {
         bool full = false;
         std::size_t movedMobiles = 0;
+        std::size_t editedSurfaces = 0; ///< whose albedo changed: their paths re-traced
         std::size_t candidatePaths = 0; ///< from the grid, before the exact test
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
@@ -167,7 +173,10 @@ private:
     /// share of the photons at the lights' present powers (shares under one photon aside).
     bool sharesDrifted() const;
     std::uint64_t mStandIns = 0;      ///< standInSignature at the last check
-    bool albedoChanged(const Registry& registry) const;
+    /// Surfaces whose albedo changed since they were traced (a patched Material): mEdits, with
+    /// mAlbedo brought up to date.
+    void findAlbedoEdits(const Registry& registry);
+    bool edited(Entity e) const;
     void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,
                   PhotonPathGrid& grid);
     void captureScene(const Registry& registry, const RayScene& scene);
@@ -223,6 +232,12 @@ private:
     // Per-frame working memory, kept to reuse its capacity.
     std::vector<PhotonEmitter> mSources;
     std::vector<MovedMobile> mMoved;
+    /// A surface whose albedo was edited this frame, and its world bounds, slightly widened.
+    struct AlbedoEdit {
+        Entity entity;
+        Aabb box;
+    };
+    std::vector<AlbedoEdit> mEdits;
     std::vector<Aabb> mQueryBoxes;
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::int32_t> mFirstAffected;

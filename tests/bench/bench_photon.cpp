@@ -12,8 +12,8 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
-//  - FullShot/<scene>: a frame that re-shoots every photon in play (a surface's albedo edited;
-//    a light added or removed costs the same), path grid and full estimate included.
+//  - FullShot/<scene>: a frame that re-shoots every photon in play (the lights that shoot
+//    photons changed, as when one is added or removed), path grid and full estimate included.
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
 //    it), at the default resolution.
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
@@ -272,32 +272,53 @@ void BM_GridBuild(benchmark::State& state, const std::string& name) {
     state.counters["grid_MiB"] = double(grid.memoryBytes()) / (1 << 20);
 }
 
-/// A full shot in play (not --full-recompute): what a light added or removed, or a surface's
-/// albedo edited, costs in the frame it happens. Each iteration edits one static mesh's albedo
-/// (a thousandth darker, then back), and the frame re-shoots every photon, rebuilds the path
-/// grid and re-estimates every vertex.
+/// A full shot in play (not --full-recompute): what a light added or removed costs in the frame
+/// it happens; the frame re-shoots every photon, rebuilds the path grid and re-estimates every
+/// vertex. Each iteration changes which lights shoot photons: with punctual lights (the atrium)
+/// a point light is added at the scene's centre or removed again; without them (the cornell
+/// box in photon mode) its lamp's stand-in tag comes off or back, so the luminaire's first
+/// bounce is counted or not.
 void BM_FullShot(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     Registry& r = w.registry;
-    Entity edited;
-    for (const Entity e : r.view<const StaticMesh, const Material>().entities())
-        if (r.get<Material>(e).baseColor != glm::vec3(0.f)) {
-            edited = e;
-            break;
-        }
-    const glm::vec3 albedo = r.get<Material>(edited).baseColor;
-    bool darker = false;
+    const bool punctual = w.system->settings().punctualLights;
+    Entity toggled;
+    if (punctual) {
+        toggled = r.create();
+        const glm::vec3 centre = r.ctx().get<SceneInfo>().bounds.center();
+        r.emplace<WorldTransform>(toggled, WorldTransform{glm::translate(glm::mat4(1.f), centre)});
+    } else {
+        for (const Entity e : r.view<const PointLight, const LightStandIn>().entities())
+            toggled = e;
+    }
+    if (toggled.isNull()) {
+        state.SkipWithError("nothing to switch");
+        return;
+    }
+    const auto lit = [&] {
+        return punctual ? r.has<PointLight>(toggled) : !r.has<LightStandIn>(toggled);
+    };
+    const auto toggle = [&] {
+        if (punctual && lit())
+            r.remove<PointLight>(toggled);
+        else if (punctual)
+            r.emplace<PointLight>(toggled, PointLight{glm::vec3(1.f), 1.f});
+        else if (lit())
+            r.emplace<LightStandIn>(toggled);
+        else
+            r.remove<LightStandIn>(toggled);
+    };
     std::size_t fullFrames = 0;
     for (auto _ : state) {
-        darker = !darker;
-        r.patch<Material>(edited).baseColor = darker ? 0.999f * albedo : albedo;
+        toggle();
         w.still();
         fullFrames += w.system->lastFrame().full ? 1 : 0;
     }
-    if (darker) { // leave the world as it was for the benchmarks after this one
-        r.patch<Material>(edited).baseColor = albedo;
+    if (lit()) { // leave the world as it was for the benchmarks after this one
+        toggle();
         w.still();
     }
+    if (punctual) r.destroy(toggled);
     if (fullFrames != std::size_t(state.iterations()))
         state.SkipWithError("a frame was not a full shot");
 }

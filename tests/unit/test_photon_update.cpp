@@ -1559,6 +1559,57 @@ TEST(PhotonUpdate, AMobileThatLeavesTheDirectionalLightsBoxIsNamedOnceAndCanBeCo
     }
 }
 
+TEST(PhotonUpdate, AnAlbedoEditRetracesThePathsThatHitTheSurfaceFromThereAndMatchesAFreshShot) {
+    // The paths that hit the edited surface are re-traced from that hit (the same ray lands
+    // where it did, then reflects with the new albedo); no other path changes, and the store is
+    // what a fresh shot with the new albedo gives, bit for bit. A static surface, then a mobile.
+    const glm::vec3 edit(0.3f, 0.5f, 0.2f);
+    for (const bool mobile : {false, true}) {
+        SCOPED_TRACE(mobile ? "mobile" : "static");
+        Registry registry;
+        const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+        buildRayScene(registry);
+        PhotonUpdateSystem system(settingsWith(10'000));
+        firstUpdate(registry, system);
+        const Entity target = mobile ? room.cube : room.pillar;
+        const PhotonStore before = storeOf(registry);
+        std::vector<int> expected(before.pathCount(), -1);
+        std::size_t hitting = 0;
+        for (std::uint32_t p = 0; p < before.pathCount(); ++p)
+            for (std::uint32_t k = 0; k < before.paths[p].count; ++k)
+                if (before.segments.hitEntity[before.segmentIndex(p, k)] == target) {
+                    expected[p] = int(k);
+                    ++hitting;
+                    break;
+                }
+        ASSERT_GT(hitting, 100u);
+        ASSERT_LT(hitting, before.pathCount() / 2);
+
+        registry.patch<Material>(target).baseColor = edit;
+        system.update(registry, FrameContext{1});
+        EXPECT_FALSE(deltaOf(registry).full);
+        EXPECT_EQ(system.lastFrame().editedSurfaces, 1u);
+        EXPECT_EQ(system.lastFrame().retracedPaths, hitting);
+        expectExactDelta(before, storeOf(registry), deltaOf(registry), expected);
+        registry.clearChanges();
+
+        Registry fresh;
+        const test::Room same = buildRoom(fresh, kCubeRest, kCrateRest);
+        fresh.get<Material>(mobile ? same.cube : same.pillar).baseColor = edit;
+        buildRayScene(fresh);
+        PhotonUpdateSystem reference(settingsWith(10'000));
+        firstUpdate(fresh, reference);
+        EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+
+        // Patching the same value again, or another component's field, re-traces nothing.
+        registry.patch<Material>(target).baseColor = edit;
+        registry.patch<Material>(room.walls).emission = glm::vec3(0.f);
+        system.update(registry, FrameContext{2});
+        EXPECT_TRUE(deltaOf(registry).empty());
+        EXPECT_EQ(system.lastFrame().editedSurfaces, 0u);
+    }
+}
+
 TEST(PhotonUpdate, AnAlbedoOutsideZeroToOneIsClampedAndNamed) {
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
