@@ -14,6 +14,7 @@
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
 //  - FullShot/<scene>: a frame that re-shoots every photon in play (the lights that shoot
 //    photons changed, as when one is added or removed), path grid and full estimate included.
+//  - AlbedoEdit/<scene>: a frame after a mobile's albedo was edited (its paths re-traced).
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
 //    it), at the default resolution.
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
@@ -323,6 +324,30 @@ void BM_FullShot(benchmark::State& state, const std::string& name) {
         state.SkipWithError("a frame was not a full shot");
 }
 
+/// A surface's albedo edited in play: the first mobile's baseColor a tenth darker, then back,
+/// each frame; only the paths that hit it are re-traced (from that hit).
+void BM_AlbedoEdit(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    Registry& r = w.registry;
+    const Entity edited = w.mobiles.front();
+    const glm::vec3 albedo = r.get<Material>(edited).baseColor;
+    bool darker = false;
+    double retraced = 0;
+    for (auto _ : state) {
+        darker = !darker;
+        r.patch<Material>(edited).baseColor = darker ? 0.9f * albedo : albedo;
+        w.still();
+        retraced += double(w.system->lastFrame().retracedPaths);
+        if (w.system->lastFrame().full) state.SkipWithError("a full shot");
+    }
+    if (darker) { // leave the world as it was for the benchmarks after this one
+        r.patch<Material>(edited).baseColor = albedo;
+        w.still();
+    }
+    state.counters["retraced/frame"] = retraced / double(state.iterations());
+    state.counters["paths"] = double(w.store().pathCount());
+}
+
 void BM_MobileToggle(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     double retraced = 0, candidates = 0, segments = 0, photons = 0, detp = 0;
@@ -463,6 +488,9 @@ int main(int argc, char** argv) {
             ->Arg(16)
             ->Arg(32)
             ->Arg(48)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("AlbedoEdit").c_str(), BM_AlbedoEdit, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark(id("FullShot").c_str(), BM_FullShot, scene)
