@@ -676,7 +676,7 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
     std::mt19937 rng(2024);
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     glm::vec3 cube = kCubeRest;
-    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0;
+    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0, edits = 0;
     for (int frame = 1; frame <= 100; ++frame) {
         const float pick = unit(rng);
         if (pick < 0.7f) { // a 1 cm slide along x or z, turning back at the room's sides
@@ -701,6 +701,11 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
             const float z = -1.f + unit(rng);
             registry.patch<WorldTransform>(room.light).matrix = translation({x, y, z});
         }
+        if (frame % 20 == 7) { // a surface repainted: the pillar, then the cube, in turn
+            const float red = 0.2f + 0.6f * unit(rng);
+            registry.patch<Material>(frame % 40 == 7 ? room.pillar : room.cube).baseColor =
+                glm::vec3(red, 0.4f, 0.5f);
+        }
         registry.ctx().get<RayScene>().syncMoved(registry);
 
         const glm::dvec3 before = impactPower(storeOf(registry));
@@ -711,6 +716,7 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
         retraced += stats.retracedPaths;
         landed += stats.landedPaths;
         if (stats.reshotPaths > 0 && stats.retracedPaths > 0) ++reshotWithMoves;
+        edits += stats.editedSurfaces;
         const glm::dvec3 after = impactPower(storeOf(registry));
         const glm::dvec3 expected = before -
                                     impactPower(delta.oldSegments, 0, delta.oldSegments.size()) +
@@ -735,11 +741,12 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
             if (HasFatalFailure()) return;
         }
     }
-    // Every kind of change happened: paths re-traced, landings kept, and the light's re-shoots
-    // in frames where mobiles moved too.
+    // Every kind of change happened: paths re-traced, landings kept, the light's re-shoots in
+    // frames where mobiles moved too, and repainted surfaces.
     EXPECT_GT(retraced, 10'000u);
     EXPECT_GT(landed, 1'000u);
     EXPECT_GE(reshotWithMoves, 6u);
+    EXPECT_EQ(edits, 5u);
 }
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
