@@ -36,8 +36,9 @@ namespace qgi {
  *
  *  Memory: 4 bytes per (path, cell) entry; 4 bytes per cell and chunk (chunks are sized so
  *  that this stays below 64 MiB); 32 bytes per changed path and 4 per path; one bit per path
- *  and, per thread, 4 bytes per cell of working marks and 4 per entry of the chunk it indexes.
- * Queries are thread safe (they serialise on a mutex); build, markChanged and refresh are not. */
+ *  and, per thread, 4 bytes per cell of working marks and 4 per entry of the chunk it
+ *  indexes. Queries are thread safe (they serialise on a mutex); build, markChanged and
+ *  refresh are not.                                                                         */
 class PhotonPathGrid {
 public:
     /// Indexes every path of `store` over `bounds` with `resolution` cells along its longest
