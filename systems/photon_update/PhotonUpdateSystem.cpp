@@ -40,6 +40,11 @@ constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segm
 // than the frame's re-tracing, and a big mobile re-traces much the same paths every frame.
 constexpr std::size_t kIdleChangedRatio = 64;
 constexpr std::size_t kIdleRetracedMultiple = 2;
+// The grid is rebuilt at once when more than 1/16 of the paths are changed and more than 8
+// times this frame's re-traced paths that may change again (all but those re-traced for an
+// albedo edit alone): cornell's moving block keeps about 1/8 changed with 55k re-traced a frame.
+constexpr std::size_t kRebuildChangedRatio = 16;
+constexpr std::size_t kRebuildRecurringMultiple = 8;
 // How far a light's power per photon may drift from the mean before photons are shared anew
 // (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
 constexpr double kShareDrift = 4.0;
@@ -248,12 +253,25 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         retrace(*scene, store, delta);
     }
     const StageTimer timer(profiler, "grid", mStats.gridMs);
-    if (!mJobs.empty()) grid.markChanged(store, delta.paths);
+    // A frame that leaves a large share of the paths changed for good (a repainted floor: its
+    // paths will not change again next frame, as a moving mobile's do) rebuilds the grid:
+    // re-indexed a budget at a time, they would leave every query testing their boxes for
+    // hundreds of frames.
+    const std::size_t recurring = delta.paths.size() - mStats.repaintedPaths;
+    const bool rebuild =
+        grid.changedPathCount() + delta.paths.size() >
+        std::max(store.pathCount() / kRebuildChangedRatio, kRebuildRecurringMultiple * recurring);
+    if (!mJobs.empty() && !rebuild) grid.markChanged(store, delta.paths);
     // A little of the garbage re-traced paths left, every frame (PhotonStoreSpace).
     const PhotonStoreSpace::Reclaimed reclaimed =
         mSpace.reclaim(store, double(mSettings.compactionFraction));
     mStats.compacted = reclaimed.laidOut;
     mStats.compactedRegions = reclaimed.regions;
+    if (rebuild) {
+        grid.build(store, mSceneBox, mSettings.gridResolution);
+        mStats.reindexedPaths = store.pathCount();
+        return;
+    }
     // Also on still frames: the index catches up with earlier changes. While few paths are
     // changed it idles: queries scan their boxes cheaply, and paths near a moving mobile
     // would change again anyway.
@@ -347,36 +365,41 @@ bool PhotonUpdateSystem::litByDirectionalLight() const {
 }
 
 void PhotonUpdateSystem::findAlbedoEdits(const Registry& registry) {
+    for (const AlbedoEdit& edit : mEdits)
+        mEditedByIndex[edit.entity.index] = Entity{};
     mEdits.clear();
     for (const Entity e : registry.changed<Material>()) {
         if (e.index >= mAlbedo.size() || !registry.alive(e) || !isTraced(registry, e)) continue;
         if (edited(e) || albedoOf(registry.tryGet<Material>(e)) == mAlbedo[e.index]) continue;
         mAlbedo[e.index] = tracedAlbedo(registry, e);
-        // Where its surface is now: the hits recorded on it lie there (a mobile's paths were
-        // re-traced at each move, and one that moved this frame has its old box queried too).
+        // Where the hits recorded on it lie: where the ray scene holds it (not where its
+        // components say, which the ray scene may have refused), at its pose as traced. A
+        // mobile that moved this frame has its old box queried as a moved mobile; one out of
+        // the world has no hits.
         Aabb box;
-        const Mesh* mesh = registry.tryGet<Mesh>(e);
-        const WorldTransform* world = registry.tryGet<WorldTransform>(e);
-        if (mesh && world)
-            for (const glm::vec3& p : mesh->positions)
-                box.extend(glm::vec3(world->matrix * glm::vec4(p, 1.f)));
-        mEdits.push_back({e, box.empty() ? box : widened(box)});
+        if (const auto mobile = mMobileIndex.find(e); mobile != mMobileIndex.end()) {
+            const Mobile& m = mMobiles[mobile->second];
+            if (m.active) box = widened(transformBox(m.objectBounds, m.pose));
+        } else if (const auto still = mStaticBoxes.find(e); still != mStaticBoxes.end()) {
+            box = still->second;
+        }
+        mEdits.push_back({e, box});
+        if (mEditedByIndex.size() <= e.index) mEditedByIndex.resize(e.index + 1);
+        mEditedByIndex[e.index] = e;
     }
     mStats.editedSurfaces = mEdits.size();
 }
 
-bool PhotonUpdateSystem::edited(Entity e) const {
-    for (const AlbedoEdit& edit : mEdits)
-        if (edit.entity == e) return true;
-    return false;
-}
-
 void PhotonUpdateSystem::captureScene(const Registry& registry, const RayScene& scene) {
     mSceneBox = {};
+    mStaticBoxes.clear();
     registry.view<const StaticMesh, const Mesh, const WorldTransform>().each(
-        [&](const StaticMesh&, const Mesh& mesh, const WorldTransform& world) {
+        [&](Entity e, const StaticMesh&, const Mesh& mesh, const WorldTransform& world) {
+            Aabb box;
             for (const glm::vec3& p : mesh.positions)
-                mSceneBox.extend(glm::vec3(world.matrix * glm::vec4(p, 1.f)));
+                box.extend(glm::vec3(world.matrix * glm::vec4(p, 1.f)));
+            mSceneBox.extend(box);
+            if (!box.empty()) mStaticBoxes.emplace(e, widened(box));
         });
     mMobiles.clear();
     mMobileIndex.clear();
@@ -618,9 +641,14 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     }
     for (const Job& job : mJobs)
         setBit(mReshooting, job.path, false);
-    for (std::size_t i = 0; i < mCandidates.size(); ++i)
-        if (mFirstAffected[i] >= 0)
-            mJobs.push_back({mCandidates[i], std::uint32_t(mFirstAffected[i]), false});
+    for (std::size_t i = 0; i < mCandidates.size(); ++i) {
+        if (mFirstAffected[i] < 0) continue;
+        const std::uint32_t k = std::uint32_t(mFirstAffected[i]);
+        mJobs.push_back({mCandidates[i], k, false});
+        if (!mEdits.empty() &&
+            edited(store.segments.hitEntity[store.segmentIndex(mCandidates[i], k)]))
+            ++mStats.repaintedPaths;
+    }
     mStats.candidatePaths = mCandidates.size();
     mStats.retracedPaths = mJobs.size() - mStats.reshotPaths;
 }

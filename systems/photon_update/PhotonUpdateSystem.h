@@ -53,10 +53,12 @@ class PhotonPathGrid;
  *     rule, and the store stays bit-identical to a fresh shot.
  *   - Surfaces whose albedo was edited (Material::baseColor patched): the paths with a segment
  *     that hit one are re-traced from that segment (the same ray lands where it did and
- *     reflects with the new albedo), so the store is a fresh shot's with the new albedo, bit
- *     for bit. Candidates come from the path grid over the surface's world bounds. The cost
- *     grows with the paths that hit it: a pillar is cheap, the floor of a room costs about a
- *     full shot.
+ *     reflects with the new albedo): the edit adds no error of its own, and on a store that
+ *     was a fresh shot's the result is a fresh shot's with the new albedo, bit for bit.
+ *     Candidates come from the path grid over the surface's bounds where the ray scene holds
+ *     it. The cost grows with the paths that hit it; an edit that leaves more than 1/16 of
+ *     the paths changed (and more than 8 times the frame's other re-traced paths) also
+ *     rebuilds the path grid in that frame.
  *   - Lights that moved or changed: their own photons are re-shot with the same indices,
  *     reshootBudget photons per frame in all (shared evenly among such lights), oldest first,
  *     until each has been re-shot once since its last change; the delta reports each one with
@@ -91,8 +93,9 @@ public:
         bool full = false;
         std::size_t movedMobiles = 0;
         std::size_t editedSurfaces = 0; ///< whose albedo changed: their paths re-traced
+        std::size_t repaintedPaths = 0; ///< of the re-traced, those first affected by an edit
         std::size_t candidatePaths = 0; ///< from the grid, before the exact test
-        std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved
+        std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved or an albedo changed
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
         std::size_t retestedSegments = 0; ///< segments tested again: did they land?
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
@@ -176,7 +179,9 @@ private:
     /// Surfaces whose albedo changed since they were traced (a patched Material): mEdits, with
     /// mAlbedo brought up to date.
     void findAlbedoEdits(const Registry& registry);
-    bool edited(Entity e) const;
+    bool edited(Entity e) const {
+        return e.index < mEditedByIndex.size() && mEditedByIndex[e.index] == e;
+    }
     void shootAll(const Registry& registry, const RayScene& scene, PhotonStore& store,
                   PhotonPathGrid& grid);
     void captureScene(const Registry& registry, const RayScene& scene);
@@ -238,6 +243,8 @@ private:
         Aabb box;
     };
     std::vector<AlbedoEdit> mEdits;
+    std::vector<Entity> mEditedByIndex; ///< by Entity::index: the entity when edited this frame
+    std::unordered_map<Entity, Aabb> mStaticBoxes; ///< world bounds of each static, widened
     std::vector<Aabb> mQueryBoxes;
     std::vector<std::uint32_t> mCandidates;
     std::vector<std::int32_t> mFirstAffected;

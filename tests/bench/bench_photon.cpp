@@ -14,7 +14,8 @@
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
 //  - FullShot/<scene>: a frame that re-shoots every photon in play (the lights that shoot
 //    photons changed, as when one is added or removed), path grid and full estimate included.
-//  - AlbedoEdit/<scene>: a frame after a mobile's albedo was edited (its paths re-traced).
+//  - AlbedoEdit/<scene>/<mobile|floor>: a frame after the albedo of the first mobile, or of
+//    the floor, was edited (the paths that hit it re-traced; for the floor, the grid rebuilt).
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
 //    it), at the default resolution.
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
@@ -23,6 +24,7 @@
 #include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/MobileMesh.h"
+#include "components/Name.h"
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "components/StaticMesh.h"
@@ -324,12 +326,19 @@ void BM_FullShot(benchmark::State& state, const std::string& name) {
         state.SkipWithError("a frame was not a full shot");
 }
 
-/// A surface's albedo edited in play: the first mobile's baseColor a tenth darker, then back,
-/// each frame; only the paths that hit it are re-traced (from that hit).
-void BM_AlbedoEdit(benchmark::State& state, const std::string& name) {
+/// A surface's albedo edited in play: its baseColor a tenth darker, then back, each frame; only
+/// the paths that hit it are re-traced (from that hit). `surface`: a static mesh's name, or
+/// empty for the first mobile.
+void BM_AlbedoEdit(benchmark::State& state, const std::string& name, const std::string& surface) {
     PhotonWorld& w = world(name);
     Registry& r = w.registry;
-    const Entity edited = w.mobiles.front();
+    Entity edited = surface.empty() ? w.mobiles.front() : Entity{};
+    for (const Entity e : r.view<const Name, const StaticMesh>().entities())
+        if (r.get<Name>(e).value == surface) edited = e;
+    if (edited.isNull()) {
+        state.SkipWithError("no such surface");
+        return;
+    }
     const glm::vec3 albedo = r.get<Material>(edited).baseColor;
     bool darker = false;
     double retraced = 0;
@@ -346,6 +355,8 @@ void BM_AlbedoEdit(benchmark::State& state, const std::string& name) {
     }
     state.counters["retraced/frame"] = retraced / double(state.iterations());
     state.counters["paths"] = double(w.store().pathCount());
+    state.counters["grid_rebuilt"] =
+        w.system->lastFrame().reindexedPaths == w.store().pathCount() ? 1.0 : 0.0;
 }
 
 void BM_MobileToggle(benchmark::State& state, const std::string& name) {
@@ -490,7 +501,11 @@ int main(int argc, char** argv) {
             ->Arg(48)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
-        RegisterBenchmark(id("AlbedoEdit").c_str(), BM_AlbedoEdit, scene)
+        RegisterBenchmark((id("AlbedoEdit") + "/mobile").c_str(), BM_AlbedoEdit, scene, "")
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark((id("AlbedoEdit") + "/floor").c_str(), BM_AlbedoEdit, scene,
+                          std::string(scene == "cornell" ? "floor" : "court floor"))
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark(id("FullShot").c_str(), BM_FullShot, scene)
