@@ -333,8 +333,9 @@ void BM_AlbedoEdit(benchmark::State& state, const std::string& name, const std::
     PhotonWorld& w = world(name);
     Registry& r = w.registry;
     Entity edited = surface.empty() ? w.mobiles.front() : Entity{};
-    for (const Entity e : r.view<const Name, const StaticMesh>().entities())
-        if (r.get<Name>(e).value == surface) edited = e;
+    if (!surface.empty())
+        for (const Entity e : r.view<const Name, const StaticMesh>().entities())
+            if (r.get<Name>(e).value == surface) edited = e;
     if (edited.isNull()) {
         state.SkipWithError("no such surface");
         return;
