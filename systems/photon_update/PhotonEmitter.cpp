@@ -122,7 +122,7 @@ void prepareSurface(const Registry& registry, PhotonEmitter& emitter) {
 } // namespace
 
 void findEmitterSources(const Registry& registry, const PhotonSettings& settings,
-                        std::vector<PhotonEmitter>& out, std::span<const PhotonEmitter> shot) {
+                        std::vector<PhotonEmitter>& out) {
     const auto add = [&](EmitterKind kind, Entity e, const glm::mat4& world) -> PhotonEmitter& {
         PhotonEmitter& emitter = out.emplace_back();
         emitter.kind = kind;
@@ -159,13 +159,8 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
                 // the world (MobileMesh::active) shines no light.
                 const bool traced = registry.has<StaticMesh>(e) ||
                                     (registry.has<MobileMesh>(e) && !outOfWorld(registry, e));
-                const bool emits = traced && (l.x != 0.f || l.y != 0.f || l.z != 0.f);
-                const bool wasShot =
-                    std::any_of(shot.begin(), shot.end(), [&](const PhotonEmitter& s) {
-                        return s.kind == EmitterKind::Surface && s.entity == e;
-                    });
-                if (emits || wasShot)
-                    add(EmitterKind::Surface, e, world.matrix).radiant = emits ? l : glm::vec3(0.f);
+                if (traced && (l.x != 0.f || l.y != 0.f || l.z != 0.f))
+                    add(EmitterKind::Surface, e, world.matrix).radiant = l;
             });
     }
 }

@@ -10,7 +10,6 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
-#include <span>
 #include <vector>
 
 namespace qgi {
@@ -52,6 +51,10 @@ struct PhotonEmitter {
     glm::vec3 radiant{0.f};
     float innerAngle = 0.f; ///< spot, radians, half angle
     float outerAngle = 0.f; ///< spot, radians, half angle
+    /// Kept by the photon update for a light that is no longer among the sources (its entity,
+    /// light component or emission gone, or an emissive mobile out of the world): dark, its
+    /// photons waiting with their indices until it is listed again or a full shot drops it.
+    bool absent = false;
 
     // ---- derived (prepareEmitter) ------------------------------------------------------------
     glm::vec3 power{0.f};    ///< W emitted, linear RGB; 0 for a light that cannot emit
@@ -82,11 +85,10 @@ struct PhotonEmitter {
 /// Appends the sources of every light the settings enable, in a fixed order (point, spot,
 /// directional, then emissive meshes, each in registry order); fields other than the source
 /// ones keep their defaults. A mesh that emits nothing, or an emissive mobile out of the world
-/// (MobileMesh::active false), is a source only when it is among `shot` (the lights the photons
-/// were shot from): then a dark one, its radiance 0, so that its photons wait for it. Reads only
-/// components: cheap enough for every frame.
+/// (MobileMesh::active false), is no source. Reads only components: cheap enough for every
+/// frame.
 void findEmitterSources(const Registry& registry, const PhotonSettings& settings,
-                        std::vector<PhotonEmitter>& out, std::span<const PhotonEmitter> shot = {});
+                        std::vector<PhotonEmitter>& out);
 
 /// Derives power and sampling data from the source; `sceneBox` bounds what a directional light
 /// must cover. A light with a non-finite, negative or out-of-range value gets power 0 and a

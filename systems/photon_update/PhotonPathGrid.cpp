@@ -211,6 +211,27 @@ void PhotonPathGrid::build(const PhotonStore& store, const Aabb& bounds, std::ui
     mGeneration = store.generation;
 }
 
+void PhotonPathGrid::addEmptyPaths(const PhotonStore& store) {
+    QGI_ASSERT(mBuilt && mGeneration == store.generation && store.pathCount() >= mPathCount,
+               "the grid indexes another store");
+    const std::size_t paths = store.pathCount();
+    for (std::size_t p = mPathCount; p < paths; ++p)
+        QGI_ASSERT(store.paths[p].count == 0, "path ", p, " was added with segments");
+    // Empty paths are in no cell's list: the last chunk takes them up to its size, and new
+    // chunks with empty lists the rest.
+    if (!mChunks.empty())
+        mChunks.back().end = std::uint32_t(std::min(paths, mChunks.back().first + mChunkPaths));
+    while (mChunks.empty() ? paths > 0 : mChunks.back().end < paths) {
+        Chunk& chunk = mChunks.emplace_back();
+        chunk.first = mChunks.size() == 1 ? 0u : mChunks[mChunks.size() - 2].end;
+        chunk.end = std::uint32_t(std::min(paths, std::size_t(chunk.first) + mChunkPaths));
+        chunk.offsets.assign(cellCount() + kSideCells + 1, 0);
+    }
+    mChangedSlot.resize(paths, kUnchanged);
+    mSeen.resize((paths + 63) / 64, 0);
+    mPathCount = paths;
+}
+
 void PhotonPathGrid::clear() {
     mBuilt = false;
     mPathCount = 0;

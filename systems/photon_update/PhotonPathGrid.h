@@ -49,12 +49,18 @@ public:
     void clear();
 
     /// Whether the grid indexes `store`'s current ray set: built from it since its last full
-    /// shot (PhotonStore::generation), and kept up to date since (markChanged: the photon
-    /// update, the store's only writer, reports every path it changes). A consumer that finds
+    /// shot (PhotonStore::generation), and kept up to date since (markChanged and
+    /// addEmptyPaths: the photon update, the store's only writer, reports every path it
+    /// changes or adds). A consumer that finds
     /// it false must treat every path as a candidate.
     bool indexes(const PhotonStore& store) const {
         return mBuilt && mGeneration == store.generation && mPathCount == store.pathCount();
     }
+
+    /// Takes in the paths appended to `store` since the grid last saw it, which must still be
+    /// empty (no segments): a light added in play, whose photons are shot later and marked
+    /// changed then. Costs in proportion to the new paths.
+    void addEmptyPaths(const PhotonStore& store);
 
     /// Marks `paths` changed (their segments in `store` are new): until their chunk is
     /// re-indexed, queries test them by the bounding box of their current segments.

@@ -64,6 +64,14 @@ void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
     store.segments = std::move(packed);
 }
 
+void PhotonStoreSpace::addEmptyPaths(const PhotonStore& store) {
+    if (!laidOut()) return;
+    const std::size_t regions = (store.paths.size() + mRegionPaths - 1) / mRegionPaths;
+    Region spanless;
+    spanless.begin = spanless.end = spanless.cursor = mOverflowStart;
+    if (mRegions.size() < regions) mRegions.resize(regions, spanless);
+}
+
 void PhotonStoreSpace::release(Region& region, const PhotonPath& path, std::size_t segments) {
     mReleased += segments;
     if (path.first >= mOverflowStart)
@@ -159,7 +167,8 @@ PhotonStoreSpace::Reclaimed PhotonStoreSpace::reclaim(PhotonStore& store, double
     for (std::size_t r = 0; r < mRegions.size(); ++r) {
         const Region& region = mRegions[r];
         largest = std::max(largest, region.end - region.begin);
-        if (region.live > region.end - region.begin) continue; // cannot be packed in place
+        // Cannot be packed in place (or has no span: paths added since the layout).
+        if (region.live > region.end - region.begin || region.room == 0) continue;
         if (2 * reclaimable(region) >= region.room || (drainOverflow && region.overflowed > 0))
             mOrder.push_back(r);
     }

@@ -44,6 +44,10 @@ public:
     /// one whose overflow grew too large. Copies every live segment once, in parallel, into a
     /// new buffer with capacity for `overflow` times the live segments past the regions.
     void layOut(PhotonStore& store, double overflow);
+    /// Takes in the paths appended to `store` since its layout, which must be empty (a light
+    /// added in play). Regions past the laid-out ones get no span: their paths live in the
+    /// overflow until the next layOut gives them room.
+    void addEmptyPaths(const PhotonStore& store);
     /// Forgets the layout: the store is used as traced, and `place` must not be called until
     /// the next layOut (a store re-shot every frame never needs one).
     void clear();

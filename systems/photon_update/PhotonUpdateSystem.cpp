@@ -48,6 +48,9 @@ constexpr std::size_t kRebuildRecurringMultiple = 8;
 // How far a light's power per photon may drift from the mean before photons are shared anew
 // (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
 constexpr double kShareDrift = 4.0;
+// Lights added in play get photons appended to the store, up to this many times
+// PhotonSettings::photonCount in all.
+constexpr std::size_t kMaxStoreGrowth = 2;
 // reuseLandedPaths: a segment tested again lands where it did within this fraction of the
 // scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
 // it).
@@ -225,12 +228,12 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     mStats = {};
 
     mSources.clear();
-    findEmitterSources(registry, mSettings, mSources, mEmitters);
+    findEmitterSources(registry, mSettings, mSources);
     if (mShot) {
         findMovedMobiles(registry, *scene, delta);
         findAlbedoEdits(registry); // a full shot below reads every albedo anew anyway
     }
-    if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store)) {
+    if (!mShot || mSettings.fullRecompute || detectLightChanges(registry, store, grid)) {
         shootAll(registry, *scene, store, grid);
         delta.full = true;
         return;
@@ -293,45 +296,130 @@ std::uint64_t standInSignature(const Registry& registry) {
     return h.value();
 }
 
-bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store) {
-    if (std::min(mSources.size(), kMaxLights) != mEmitters.size()) return true;
+std::int64_t PhotonUpdateSystem::emitterOf(const PhotonEmitter& source) const {
+    const auto it = mEmitterIndex.find({source.kind, source.entity});
+    return it == mEmitterIndex.end() ? -1 : std::int64_t(it->second);
+}
+
+void PhotonUpdateSystem::indexEmitters() {
+    mEmitterIndex.clear();
     for (std::size_t i = 0; i < mEmitters.size(); ++i)
-        if (mSources[i].kind != mEmitters[i].kind || mSources[i].entity != mEmitters[i].entity)
-            return true;
+        mEmitterIndex.emplace(std::pair(mEmitters[i].kind, mEmitters[i].entity), std::uint32_t(i));
+}
+
+bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStore& store,
+                                            PhotonPathGrid& grid) {
     if (const std::uint64_t standIns = standInSignature(registry); standIns != mStandIns) {
         mStandIns = standIns;
         // A surface drawn by the shader (or no longer) counts its first segments otherwise:
         // the stored lights' flags change, and DETP must start over.
         for (const PhotonEmitter& e : mEmitters)
-            if (e.kind == EmitterKind::Surface &&
+            if (e.kind == EmitterKind::Surface && !e.absent &&
                 hasLightStandIn(registry, e.entity) != e.directDrawn)
                 return true;
+    }
+    mSourceOf.assign(mEmitters.size(), -1);
+    mAdded.clear();
+    for (std::size_t s = 0; s < mSources.size(); ++s) {
+        const std::int64_t e = emitterOf(mSources[s]);
+        if (e < 0)
+            mAdded.push_back(s);
+        else
+            mSourceOf[std::size_t(e)] = std::int64_t(s);
     }
     bool changed = false;
     for (std::size_t i = 0; i < mEmitters.size(); ++i) {
         PhotonEmitter& shot = mEmitters[i];
-        if (mSources[i].sameSource(shot)) continue;
-        PhotonEmitter edited = mSources[i]; // a source only: nothing derived to copy yet
-        edited.firstPhoton = shot.firstPhoton;
-        edited.photonCount = shot.photonCount;
-        prepareEmitter(registry, mDirectionalBox, edited);
-        // A surface moving to or from a stand-in changes what hybrid mode counts: shoot
-        // everything anew. A light switched off keeps its photons, re-shot empty (they carry
-        // nothing), for when it shines again; one that lights up without photons of its own
-        // needs a share of them (sharesDrifted).
-        if (edited.directDrawn != shot.directDrawn) return true;
+        PhotonEmitter edited;
+        if (mSourceOf[i] < 0) {
+            if (shot.absent) continue;
+            // Removed: dark from now on, its photons re-shot empty, until it is listed again.
+            edited = shot;
+            edited.absent = true;
+            edited.radiant = glm::vec3(0.f);
+            edited.power = glm::vec3(0.f);
+        } else {
+            const PhotonEmitter& source = mSources[std::size_t(mSourceOf[i])];
+            if (!shot.absent && source.sameSource(shot)) continue;
+            edited = source; // a source only: nothing derived to copy yet
+            edited.firstPhoton = shot.firstPhoton;
+            edited.photonCount = shot.photonCount;
+            prepareEmitter(registry, mDirectionalBox, edited);
+            // A surface moving to or from a stand-in changes what hybrid mode counts: shoot
+            // everything anew. A light switched off keeps its photons, re-shot empty (they
+            // carry nothing), for when it shines again; one that lights up without photons
+            // of its own gets some (addPhotons).
+            if (edited.directDrawn != shot.directDrawn) return true;
+        }
         shot = std::move(edited);
         mSweeps[i].remaining = shot.photonCount;
         store.lights[i].power = shot.power;
         changed = true;
     }
-    if (changed) {
-        store.emittedPower = glm::vec3(0.f);
-        for (const PhotonLight& light : store.lights)
-            store.emittedPower += light.power;
-        if (sharesDrifted()) return true;
+    for (const std::size_t s : mAdded) {
+        if (mEmitters.size() >= kMaxLights) {
+            // A full shot drops the removed lights; without any, the lights past the limit
+            // stay dark (the full shot named them).
+            if (std::any_of(mEmitters.begin(), mEmitters.end(),
+                            [](const PhotonEmitter& e) { return e.absent; }))
+                return true;
+            break;
+        }
+        PhotonEmitter light = mSources[s];
+        prepareEmitter(registry, mDirectionalBox, light);
+        light.firstPhoton = std::uint32_t(store.paths.size());
+        mEmitterIndex.emplace(std::pair(light.kind, light.entity), std::uint32_t(mEmitters.size()));
+        store.lights.push_back({light.entity, light.power, 0, light.directDrawn});
+        mEmitters.push_back(std::move(light));
+        mSweeps.emplace_back();
+        changed = true;
     }
-    return false;
+    if (!changed) return false;
+    store.emittedPower = glm::vec3(0.f);
+    for (const PhotonLight& light : store.lights)
+        store.emittedPower += light.power;
+    return !addPhotons(store, grid) || sharesDrifted();
+}
+
+bool PhotonUpdateSystem::addPhotons(PhotonStore& store, PhotonPathGrid& grid) {
+    const auto watts = [](const glm::vec3& p) { return double(p.x) + p.y + p.z; };
+    double litPower = 0.0, litPhotons = 0.0, waiting = 0.0;
+    for (const PhotonEmitter& e : mEmitters) {
+        if (!carriesPower(e.power)) continue;
+        if (e.photonCount > 0) {
+            litPower += watts(e.power);
+            litPhotons += e.photonCount;
+        } else {
+            waiting += watts(e.power);
+        }
+    }
+    if (!(waiting > 0.0)) return true;
+    // Photons per watt: the lit lights', so every photon carries the same power; with none
+    // lit, the configured count spread over the new ones.
+    const double rate = litPhotons > 0.0 ? litPhotons / litPower : mSettings.photonCount / waiting;
+    const double room =
+        double(kMaxStoreGrowth) * mSettings.photonCount - double(store.paths.size());
+    const double scale = rate * waiting > room ? std::max(room, 0.0) / (rate * waiting) : 1.0;
+    if (scale * kShareDrift < 1.0) return false;
+    // Empty paths at the store's end, shot within the budget like a changed light's.
+    const std::size_t before = store.paths.size();
+    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
+        PhotonEmitter& e = mEmitters[l];
+        if (!carriesPower(e.power) || e.photonCount > 0) continue;
+        const auto count = std::uint32_t(std::floor(scale * rate * watts(e.power) + 0.5));
+        if (count == 0) continue; // a share under half a photon
+        e.firstPhoton = std::uint32_t(store.paths.size());
+        e.photonCount = count;
+        store.lights[l].photonCount = count;
+        mSweeps[l] = Sweep{count, 0};
+        store.paths.resize(store.paths.size() + count, PhotonPath{0, 0, std::uint16_t(l)});
+    }
+    mStats.addedPaths = store.paths.size() - before;
+    if (mStats.addedPaths == 0) return true;
+    mReshooting.resize((store.paths.size() + 63) / 64, 0);
+    mSpace.addEmptyPaths(store);
+    grid.addEmptyPaths(store);
+    return true;
 }
 
 bool PhotonUpdateSystem::sharesDrifted() const {
@@ -464,8 +552,10 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         mSources.resize(kMaxLights);
     }
     for (std::size_t i = 0; i < mSources.size(); ++i) {
-        if (i < mEmitters.size() && mSources[i].sameSource(mEmitters[i])) {
-            mSources[i] = std::move(mEmitters[i]);
+        const std::int64_t shot = emitterOf(mSources[i]);
+        if (shot >= 0 && !mEmitters[std::size_t(shot)].absent &&
+            mSources[i].sameSource(mEmitters[std::size_t(shot)])) {
+            mSources[i] = std::move(mEmitters[std::size_t(shot)]);
             // A kept surface may have gained or lost its stand-in since it was prepared.
             if (mSources[i].kind == EmitterKind::Surface)
                 mSources[i].directDrawn = hasLightStandIn(registry, mSources[i].entity);
@@ -474,6 +564,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
         }
     }
     std::swap(mEmitters, mSources);
+    indexEmitters();
     allocatePhotons(mEmitters, mSettings.photonCount);
     mStandIns = standInSignature(registry);
     mSweeps.assign(mEmitters.size(), Sweep{});

@@ -14,8 +14,10 @@
 #include <oneapi/tbb/enumerable_thread_specific.h>
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 namespace qgi {
@@ -28,10 +30,10 @@ class PhotonPathGrid;
 /** Keeps the photon ray set in step with the scene every frame (seed 000 sections 2.2-2.3,
  *  with seed 004's emission, frame-coherent seeding and progressive refinement).
  *
- *  Full shot (first frame; a light added or removed; a light whose power drifted since the
- *  last full shot until its photon count is 4x above or below its share of the lit lights'
- *  photons (a share of one photon or more), which includes one lighting up without photons;
- *  an emissive surface gaining or losing its light stand-in; every frame with fullRecompute):
+ *  Full shot (first frame; a light whose power drifted since the last full shot until its
+ *  photon count is 4x above or below its share of the lit lights' photons (a share of one
+ *  photon or more); lights added in play that the store has no room for (below); an emissive
+ *  surface gaining or losing its light stand-in; every frame with fullRecompute):
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built (not with fullRecompute: it would cost more than it saves there, 0.4 to 1.3 times
  *  the tracing against a few per cent of DETP's full estimate; it is left empty,
@@ -67,7 +69,15 @@ class PhotonPathGrid;
  *     frames). A light switched off (a punctual light's intensity or a surface's emission
  *     set to 0, an emissive mobile taken out of the world) is such a change: its photons
  *     carry nothing, so they are re-shot empty (no segments) and wait, with their indices,
- *     for it to shine again; the lights still on keep their photons.
+ *     for it to shine again; the lights still on keep their photons. So is a light removed
+ *     (its entity or light component gone, an emissive surface's emission set to 0): it is
+ *     kept, absent and dark, until it is listed again or a full shot drops it.
+ *   - Lights added (or lighting up without photons of their own): each gets photons at the
+ *     power per photon of the lights that have some (with none lit, photonCount over the new
+ *     lights), appended to the store and shot within the same budget, so the light fades in
+ *     over photons / reshootBudget frames. The store grows to at most twice photonCount;
+ *     lights that would get less than a quarter of their share within that have the photons
+ *     shared anew (a full shot, which also drops removed lights).
  *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
  *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
  *  needs a new RayScene and a new system. So is the box directional lights cover
@@ -99,6 +109,7 @@ public:
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
         std::size_t retestedSegments = 0; ///< segments tested again: did they land?
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
+        std::size_t addedPaths = 0;     ///< appended for lights that had no photons
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
         bool compacted = false;         ///< the whole store laid out again
@@ -168,10 +179,19 @@ private:
         bool emit = false;
     };
 
-    /// Compares this frame's light sources with those shot; prepares changed lights and starts
-    /// their sweeps. True when the set of shining lights changed, or the lights' powers drifted
-    /// from their photon shares (sharesDrifted): a full shot is due.
-    bool detectLightChanges(const Registry& registry, PhotonStore& store);
+    /// Compares this frame's light sources with those shot (matched by kind and entity);
+    /// prepares changed and added lights, marks removed ones absent, starts their sweeps and
+    /// gives photons to lights without (addPhotons). True when a full shot is due: a stand-in
+    /// changed what hybrid mode counts, the new lights found no room, or the lights' powers
+    /// drifted from their photon shares (sharesDrifted).
+    bool detectLightChanges(const Registry& registry, PhotonStore& store, PhotonPathGrid& grid);
+    /// Appends photons for every shining light that has none, at the lit lights' power per
+    /// photon, within the store's room; false when some would get under 1/kShareDrift of its
+    /// share (the photons must be shared anew).
+    bool addPhotons(PhotonStore& store, PhotonPathGrid& grid);
+    /// The index of the light shot from `source` (same kind and entity), or -1.
+    std::int64_t emitterOf(const PhotonEmitter& source) const;
+    void indexEmitters();
     /// Whether a light's photon count is more than kShareDrift times above or below its exact
     /// share of the photons at the lights' present powers (shares under one photon aside).
     bool sharesDrifted() const;
@@ -227,6 +247,8 @@ private:
     Aabb mSceneBox;           ///< every mesh in the world at the first shot: the path grid's box
     Aabb mDirectionalBox; ///< what directional lights cover (PhotonSettings::directionalBounds)
     std::vector<PhotonEmitter> mEmitters; ///< as shot; index = PhotonPath::light
+    /// mEmitters by kind and entity.
+    std::map<std::pair<EmitterKind, Entity>, std::uint32_t> mEmitterIndex;
     std::vector<Sweep> mSweeps;           ///< per emitter
     std::vector<glm::vec3> mAlbedo;       ///< by Entity::index, as shot
     std::vector<Mobile> mMobiles;
@@ -236,6 +258,8 @@ private:
 
     // Per-frame working memory, kept to reuse its capacity.
     std::vector<PhotonEmitter> mSources;
+    std::vector<std::int64_t> mSourceOf; ///< per emitter: its source this frame, or -1
+    std::vector<std::size_t> mAdded;     ///< sources with no emitter yet
     std::vector<MovedMobile> mMoved;
     /// A surface whose albedo was edited this frame, and its world bounds, slightly widened.
     struct AlbedoEdit {

@@ -205,6 +205,47 @@ TEST(Detp, PointLightOverABlackPlaneThroughTheRealEmitterAndTracerFollowsTheClos
     }
 }
 
+// A lamp added in play: its photons are appended at the power per photon of the light already
+// shining and shot within the budget, so the irradiance fades in. A 10 W/sr light shot with
+// 400k photons, then a 5 W/sr lamp at the same place, its 200k photons shot 100k a frame: at
+// each stage DETP at the foot follows the closed form for the power shot so far, within four
+// binomial standard errors of the photons shot (all carry the same power).
+TEST(Detp, ALampAddedInPlayFadesInToTheClosedForm) {
+    constexpr float kIntensity = 10.f, kLampIntensity = 5.f; // W/sr
+    constexpr std::uint32_t kPhotons = 400'000, kBudget = 100'000;
+    const double h = 1.0, perPhoton = 4.0 * kPi * double(kIntensity) / double(kPhotons);
+    Registry registry;
+    const Entity floor = test::addMesh(
+        registry, gridMesh({-10.f, 0.f, -10.f}, {0.f, 0.f, 20.f}, {20.f, 0.f, 0.f}, 2), kIdentity,
+        test::grey(0.f), false, "floor");
+    test::addPointLight(registry, {0.f, float(h), 0.f}, kIntensity);
+    test::buildRayScene(registry);
+    PhotonSettings photonSettings;
+    photonSettings.photonCount = kPhotons;
+    photonSettings.reshootBudget = kBudget;
+    PhotonUpdateSystem photons(photonSettings);
+    photons.update(registry, FrameContext{});
+    registry.clearChanges();
+
+    test::addPointLight(registry, {0.f, float(h), 0.f}, kLampIntensity);
+    for (std::uint64_t frame = 0; frame <= 2; ++frame) {
+        if (frame > 0) {
+            photons.update(registry, FrameContext{frame, 0.0, 0.f, 0});
+            registry.clearChanges();
+            ASSERT_FALSE(registry.ctx().get<PhotonDelta>().full);
+            ASSERT_EQ(photons.lastFrame().reshotPaths, kBudget);
+        }
+        const double shot = double(kPhotons + frame * kBudget);
+        for (const double r : {0.3, 0.1, 0.03}) {
+            const double power = perPhoton * shot;
+            EXPECT_NEAR(detpAtFoot(registry, floor, r), footExpectation(power, h, r),
+                        4.0 * footSigma(power, h, r, shot))
+                << "frame " << frame << ", r = " << r;
+        }
+    }
+    EXPECT_EQ(registry.ctx().get<PhotonStore>().pathCount(), 600'000u);
+}
+
 /// Parallel rays of total power 1 W over the unit square at y = 0, in a 10 x 10 quad floor; the
 /// true irradiance is 1 W/m^2. Returns the relative errors at the 81 interior vertices, whose
 /// discs (r = 0.04, spacing 0.1) are disjoint and inside the square.

@@ -180,5 +180,27 @@ TEST(PhotonPathGrid, ChangedPathsAreFoundUntilTheirChunkIsReindexed) {
     EXPECT_EQ(both, merged);
 }
 
+TEST(PhotonPathGrid, PathsOfALightAddedInPlayAreFoundAndIndexed) {
+    // A lamp as bright as the room's light: 20,000 photons appended (the last chunk filled up,
+    // new chunks after it), shot in one frame and marked changed; queries find them at once,
+    // and once re-indexed, cell-precisely.
+    GridWorld w(1);
+    test::addPointLight(w.registry, {-1.f, 0.5f, 1.f}, 10.f);
+    w.system.update(w.registry, FrameContext{1, 0.0, 0.f, 0});
+    w.registry.clearChanges();
+    ASSERT_EQ(w.system.lastFrame().addedPaths, 20'000u);
+    ASSERT_EQ(w.store().pathCount(), 40'000u);
+    EXPECT_EQ(w.grid().pathCount(), 40'000u);
+    EXPECT_TRUE(w.grid().indexes(w.store()));
+    EXPECT_EQ(w.grid().changedPathCount(), 20'000u);
+    expectQueries(w, 21, false);
+    PhotonPathGrid& grid = w.registry.ctx().get<PhotonPathGrid>();
+    // The chunks holding new paths: the last one shot, filled up to 4,096 paths (photons
+    // 16,384 to 20,479), four more of 4,096 and one of 3,136.
+    EXPECT_EQ(grid.refresh(w.store(), w.store().pathCount(), 0), 23'616u);
+    EXPECT_EQ(grid.changedPathCount(), 0u);
+    expectQueries(w, 22, true);
+}
+
 } // namespace
 } // namespace qgi

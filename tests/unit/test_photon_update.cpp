@@ -645,7 +645,7 @@ glm::dvec3 impactPower(const PhotonStore& store) {
 // mobiles' moves. Every frame the delta accounts for every watt the store gained or lost, and
 // every 10 frames DETP's incremental irradiance equals a fresh full estimate over the current
 // ray set, within the rounding of its sums.
-TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
+TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
     // Vertices all over, 10 cm apart on the mobiles and 25 cm on the room: discs to cross.
@@ -676,7 +676,8 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
     std::mt19937 rng(2024);
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     glm::vec3 cube = kCubeRest;
-    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0, edits = 0;
+    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0, edits = 0, added = 0;
+    Entity lamp;
     for (int frame = 1; frame <= 100; ++frame) {
         const float pick = unit(rng);
         if (pick < 0.7f) { // a 1 cm slide along x or z, turning back at the room's sides
@@ -701,6 +702,11 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
             const float z = -1.f + unit(rng);
             registry.patch<WorldTransform>(room.light).matrix = translation({x, y, z});
         }
+        // Lamps added and removed in play: their photons appended and shot within the
+        // budget, then re-shot empty.
+        if (frame == 30) lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 5.f);
+        if (frame == 55) registry.destroy(lamp);
+        if (frame == 75) test::addPointLight(registry, {0.5f, 0.3f, -1.f}, 3.f);
         if (frame % 20 == 7) { // a surface repainted: the pillar, then the cube, in turn
             const float red = 0.2f + 0.6f * unit(rng);
             registry.patch<Material>(frame % 40 == 7 ? room.pillar : room.cube).baseColor =
@@ -717,6 +723,7 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
         landed += stats.landedPaths;
         if (stats.reshotPaths > 0 && stats.retracedPaths > 0) ++reshotWithMoves;
         edits += stats.editedSurfaces;
+        added += stats.addedPaths;
         const glm::dvec3 after = impactPower(storeOf(registry));
         const glm::dvec3 expected = before -
                                     impactPower(delta.oldSegments, 0, delta.oldSegments.size()) +
@@ -741,12 +748,15 @@ TEST(PhotonUpdate, AHundredMovesKeepTheStoresPowerAccountedAndDetpEqualToAFullEs
             if (HasFatalFailure()) return;
         }
     }
-    // Every kind of change happened: paths re-traced, landings kept, the light's re-shoots in
-    // frames where mobiles moved too, and repainted surfaces.
+    // Every kind of change happened: paths re-traced, landings kept, the lights' re-shoots in
+    // frames where mobiles moved too, repainted surfaces and lamps added (10,000 and 6,000
+    // photons at the room light's 10 W/sr per 20,000).
     EXPECT_GT(retraced, 10'000u);
     EXPECT_GT(landed, 1'000u);
     EXPECT_GE(reshotWithMoves, 6u);
     EXPECT_EQ(edits, 5u);
+    EXPECT_EQ(added, 16'000u);
+    EXPECT_EQ(storeOf(registry).pathCount(), 36'000u);
 }
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
@@ -1318,9 +1328,123 @@ TEST(PhotonUpdate, ARedPhotonOnAGreenWallIsTracedOnWhenReTraced) {
     EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
 }
 
+/// Updates until `frames` frames have passed with no full shot; returns the paths each frame
+/// re-shot (re-traced paths aside: nothing moves).
+std::vector<std::size_t> reshotPerFrame(Registry& registry, PhotonUpdateSystem& system,
+                                        std::uint64_t& frame, int frames) {
+    std::vector<std::size_t> perFrame;
+    for (int i = 0; i < frames; ++i) {
+        system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+        registry.clearChanges();
+        EXPECT_FALSE(deltaOf(registry).full) << "frame " << frame;
+        perFrame.push_back(system.lastFrame().reshotPaths);
+    }
+    return perFrame;
+}
+
+TEST(PhotonUpdate, AnAddedLightGetsPhotonsAtTheSamePowerPerPhotonShotWithinTheBudget) {
+    // The room's 10 W/sr light has 4,000 photons; a 5 W/sr lamp added in play gets 2,000 more,
+    // appended as photons 4,000 to 5,999 and shot 800 a frame. Photon i's choices come from i
+    // and its light's power per photon is unchanged, so the result is, bit for bit, the full
+    // shot of 6,000 photons over both lights; a mobile moved during the sweep re-traces
+    // only what it touches, the new photons included.
+    PhotonSettings settings = settingsWith(4'000);
+    settings.reshootBudget = 800;
+    settings.reuseLandedPaths = false; // the seed's rule: bit for bit a fresh shot
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore shot = storeOf(registry);
+
+    const glm::vec3 lampAt(-1.f, 0.5f, 1.f);
+    test::addPointLight(registry, lampAt, 5.f);
+    std::uint64_t frame = 0;
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 1), std::vector<std::size_t>{800});
+    EXPECT_EQ(system.lastFrame().addedPaths, 2'000u);
+    const glm::mat4 moved = translation(kCubeRest + glm::vec3(0.4f, 0.f, 0.3f));
+    moveAll(registry, system, {{room.cube, moved}}, ++frame);
+    EXPECT_FALSE(deltaOf(registry).full);
+    EXPECT_GT(system.lastFrame().retracedPaths, 0u);
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 2), (std::vector<std::size_t>{400, 0}));
+
+    const PhotonStore& store = storeOf(registry);
+    ASSERT_EQ(store.pathCount(), 6'000u);
+    ASSERT_EQ(store.lights.size(), 2u);
+    EXPECT_EQ(store.lights[1].photonCount, 2'000u);
+    EXPECT_EQ(store.emittedPower, shot.emittedPower * 1.5f);
+    for (std::uint32_t p = 4'000; p < 6'000; ++p) {
+        ASSERT_GT(store.paths[p].count, 0u) << "photon " << p;
+        EXPECT_EQ(store.segments.origin[store.paths[p].first], lampAt);
+    }
+
+    Registry fresh;
+    const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
+    test::addPointLight(fresh, lampAt, 5.f);
+    fresh.get<WorldTransform>(again.cube).matrix = moved;
+    buildRayScene(fresh);
+    PhotonSettings both = settings;
+    both.photonCount = 6'000;
+    PhotonUpdateSystem full(both);
+    firstUpdate(fresh, full);
+    EXPECT_TRUE(sameStore(store, storeOf(fresh)));
+}
+
+TEST(PhotonUpdate, ARemovedLightGoesDarkWithinTheBudgetAndTheStoreGrowsAtMostTwofold) {
+    // A lamp destroyed in play keeps its photons, re-shot empty; lights added later are
+    // appended while the store has room (twice photonCount). One that would get under a
+    // quarter of its share there has the photons shared anew: a full shot, which drops the
+    // removed lamp.
+    PhotonSettings settings = settingsWith(4'000);
+    settings.reshootBudget = 100'000;
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 10.f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    const PhotonStore shot = storeOf(registry);
+    ASSERT_EQ(shot.lights[1].photonCount, 2'000u);
+
+    registry.destroy(lamp);
+    std::uint64_t frame = 0;
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 2), (std::vector<std::size_t>{2'000, 0}));
+    const PhotonStore& dark = storeOf(registry);
+    EXPECT_EQ(dark.lights[1].power, glm::vec3(0.f));
+    EXPECT_EQ(dark.emittedPower, shot.lights[0].power);
+    for (std::uint32_t p = 0; p < 4'000; ++p) {
+        ASSERT_EQ(dark.paths[p].count == 0, p >= 2'000) << "photon " << p;
+        if (p < 2'000) {
+            ASSERT_EQ(dark.paths[p].count, shot.paths[p].count);
+            for (std::uint32_t k = 0; k < shot.paths[p].count; ++k)
+                ASSERT_TRUE(sameSegment(dark.segments, dark.paths[p].first + k, shot.segments,
+                                        shot.paths[p].first + k));
+        }
+    }
+
+    // 30 W/sr at 2,000 photons per 10 W/sr wants 6,000: the 4,000 left of the room will do
+    // (two thirds of its share); then 10 W/sr more finds no room.
+    test::addPointLight(registry, {1.f, 0.5f, -1.f}, 30.f);
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 1), std::vector<std::size_t>{4'000});
+    EXPECT_EQ(storeOf(registry).pathCount(), 8'000u);
+    EXPECT_EQ(storeOf(registry).lights[2].photonCount, 4'000u);
+    test::addPointLight(registry, {0.5f, 0.5f, 0.5f}, 10.f);
+    system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+    registry.clearChanges();
+    EXPECT_TRUE(deltaOf(registry).full);
+    const PhotonStore& store = storeOf(registry);
+    EXPECT_EQ(store.pathCount(), 4'000u);
+    ASSERT_EQ(store.lights.size(), 3u); // the room's light and the two added
+    EXPECT_EQ(store.lights[0].entity, room.light);
+    EXPECT_EQ(store.lights[0].photonCount, 800u);
+    EXPECT_EQ(store.lights[1].photonCount, 2'400u);
+    EXPECT_EQ(store.lights[2].photonCount, 800u);
+}
+
 TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
-    // The only light with photons switched off, and one shot without photons switched on: no
-    // light that shines has photons, so they are shared anew.
+    // The only light with photons switched off, and one shot without photons switched on: it
+    // gets photonCount photons of its own, appended, while the dark one's wait.
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
     const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 0.f);
@@ -1330,30 +1454,20 @@ TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
     ASSERT_EQ(storeOf(registry).lights[1].photonCount, 0u);
     registry.patch<PointLight>(lamp).intensity = registry.get<PointLight>(room.light).intensity;
     registry.patch<PointLight>(room.light).intensity = 0.f;
-    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
-    EXPECT_TRUE(deltaOf(registry).full);
-    EXPECT_EQ(storeOf(registry).lights[0].photonCount, 0u);
-    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 4'000u);
+    std::uint64_t frame = 0;
+    reshotPerFrame(registry, system, frame, 1);
+    const PhotonStore& store = storeOf(registry);
+    EXPECT_EQ(store.lights[0].photonCount, 4'000u);
+    EXPECT_EQ(store.lights[1].photonCount, 4'000u);
+    ASSERT_EQ(store.pathCount(), 8'000u);
+    for (std::uint32_t p = 0; p < 8'000; ++p)
+        ASSERT_EQ(store.paths[p].count > 0, p >= 4'000) << "photon " << p;
 }
 
-TEST(PhotonUpdate, AddingALightShootsEverythingAnew) {
-    Registry registry;
-    buildRoom(registry, kCubeRest, kCrateRest);
-    buildRayScene(registry);
-    PhotonUpdateSystem system(settingsWith(4'000));
-    firstUpdate(registry, system);
-    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
-    EXPECT_TRUE(deltaOf(registry).empty());
-    test::addPointLight(registry, {-1.f, 0.f, 1.f}, 30.f);
-    system.update(registry, FrameContext{2, 0.0, 0.f, 0});
-    EXPECT_TRUE(deltaOf(registry).full);
-    ASSERT_EQ(storeOf(registry).lights.size(), 2u);
-    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 3'000u); // 30 W/sr of 40 W/sr
-}
-
-TEST(PhotonUpdate, ALightThatOutgrowsItsPhotonShareIsSharedAnew) {
-    // A second lamp shot while nearly off gets no photons; when it brightens, photons are
-    // shared anew, or its light would never appear. A drift under 4x is kept.
+TEST(PhotonUpdate, ALightThatDriftsFarFromItsPhotonShareIsSharedAnew) {
+    // A lamp shot while nearly off gets no photons; brightened, it gets its share appended.
+    // A drift under 4x from the shares is kept; the room's light dimmed a hundredfold holds
+    // far more photons than its share: they are shared anew.
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
     const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 1e-6f);
@@ -1365,16 +1479,19 @@ TEST(PhotonUpdate, ALightThatOutgrowsItsPhotonShareIsSharedAnew) {
 
     const float roomIntensity = registry.get<PointLight>(room.light).intensity;
     registry.patch<PointLight>(lamp).intensity = roomIntensity;
-    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
-    registry.clearChanges();
-    EXPECT_TRUE(deltaOf(registry).full);
-    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 2'000u);
+    std::uint64_t frame = 0;
+    reshotPerFrame(registry, system, frame, 1);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 4'000u);
 
     registry.patch<PointLight>(lamp).intensity = 2.f * roomIntensity; // 4/3 of its share
-    system.update(registry, FrameContext{2, 0.0, 0.f, 0});
-    registry.clearChanges();
-    EXPECT_FALSE(deltaOf(registry).full);
-    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 2'000u);
+    reshotPerFrame(registry, system, frame, 1);
+    EXPECT_EQ(storeOf(registry).lights[1].photonCount, 4'000u);
+
+    registry.patch<PointLight>(room.light).intensity = roomIntensity / 100.f;
+    system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+    EXPECT_TRUE(deltaOf(registry).full);
+    EXPECT_EQ(storeOf(registry).pathCount(), 4'000u);
+    EXPECT_EQ(storeOf(registry).lights[0].photonCount, 20u); // 0.1 of 20.1 W/sr
 }
 
 TEST(PhotonUpdate, AStandInAddedOrMovedAwayChangesWhatHybridModeCounts) {
