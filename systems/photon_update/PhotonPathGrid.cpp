@@ -237,7 +237,7 @@ void PhotonPathGrid::clear() {
     mPathCount = 0;
     // Assigning empty vectors (not clearing them) hands their memory back.
     mChunks = std::vector<Chunk>();
-    mChangedSlot = std::vector<std::uint32_t>();
+    mChangedSlot = LargeArray<std::uint32_t>();
     mChanged = std::vector<std::uint32_t>();
     mChangedExtent = std::vector<Extent>();
     mSeen = std::vector<std::uint64_t>();

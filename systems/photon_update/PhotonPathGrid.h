@@ -149,7 +149,7 @@ private:
     std::size_t mPathCount = 0;
     std::size_t mChunkPaths = 1;
     std::vector<Chunk> mChunks;
-    std::vector<std::uint32_t> mChangedSlot; ///< per path: its index in mChanged, or kUnchanged
+    LargeArray<std::uint32_t> mChangedSlot;  ///< per path: its index in mChanged, or kUnchanged
     std::vector<std::uint32_t> mChanged;     ///< the changed paths
     std::vector<Extent> mChangedExtent;      ///< and their extents
     std::vector<std::uint32_t> mPicked;      ///< refresh's working list of chunks

@@ -28,8 +28,8 @@ struct PhotonSettings {
     /// 226 MiB, against 43k in 300 MiB at 32 and 71k in 175 MiB at 16 (docs/BENCHMARKS.md).
     std::uint32_t gridResolution = 24;
     /// Paths the index re-indexes per frame once re-traced paths pass 1/64 of all (whole
-    /// chunks, those with the most re-traced paths first); until then a re-traced path is
-    /// found by its bounding box.
+    /// chunks, those with the most re-traced paths first), plus the paths the frame re-shot
+    /// for lights that changed; until then a re-traced path is found by its bounding box.
     std::uint32_t gridRefreshBudget = 4096;
     /// The store is laid out anew (every segment copied once) when its overflow exceeds this
     /// fraction of the live segments: re-traced paths that outgrew their store region's room,

@@ -277,10 +277,14 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
     }
     // Also on still frames: the index catches up with earlier changes. While few paths are
     // changed it idles: queries scan their boxes cheaply, and paths near a moving mobile
-    // would change again anyway.
+    // would change again anyway. A light's re-shot photons do not change again next frame
+    // (a sweep takes each once, and they lie in consecutive chunks): the budget grows by them,
+    // so a long sweep (a light added with a million photons) never leaves enough changed to
+    // force a rebuild.
     const std::size_t idleUpTo =
         std::max(store.pathCount() / kIdleChangedRatio, kIdleRetracedMultiple * delta.paths.size());
-    mStats.reindexedPaths = grid.refresh(store, mSettings.gridRefreshBudget, idleUpTo);
+    mStats.reindexedPaths =
+        grid.refresh(store, mSettings.gridRefreshBudget + mStats.reshotPaths, idleUpTo);
 }
 
 /// Where the light stand-ins are (a stand-in added, removed, moved or retagged changes which

@@ -12,8 +12,10 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
-//  - FullShot/<scene>: a frame that re-shoots every photon in play (the lights that shoot
-//    photons changed, as when one is added or removed), path grid and full estimate included.
+//  - FullShot/<scene>: a frame that re-shoots every photon in play, path grid and full
+//    estimate included: the photons shared anew among the lights (atrium: a lamp 100 times
+//    brighter, then back, far from its photon share; cornell: its luminaire gaining or losing
+//    its light stand-in, which changes what hybrid mode counts).
 //  - AlbedoEdit/<scene>/<mobile|floor>: a frame after the albedo of the first mobile, or of
 //    the floor, was edited (the paths that hit it re-traced; for the floor, the grid rebuilt).
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
@@ -21,6 +23,10 @@
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
 //    re-shot within the budget), mean and worst; against FullShot, what a switch cost when it
 //    shot every photon anew.
+//  - LightAdded/atrium: a point light with a quarter of the lights' power added in play (its
+//    photons appended and shot within the budget), then destroyed (re-shot empty): frames
+//    until each sweep ends, mean and worst, against still frames of the same run. Last: it
+//    leaves the store grown.
 #include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/MobileMesh.h"
@@ -285,11 +291,12 @@ void BM_FullShot(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     Registry& r = w.registry;
     const bool punctual = w.system->settings().punctualLights;
+    // Punctual lights: the first lamp (not a stand-in), a hundred times brighter and back, its
+    // photon count 4x off its share each time. Otherwise a stand-in tagged and untagged.
     Entity toggled;
     if (punctual) {
-        toggled = r.create();
-        const glm::vec3 centre = r.ctx().get<SceneInfo>().bounds.center();
-        r.emplace<WorldTransform>(toggled, WorldTransform{glm::translate(glm::mat4(1.f), centre)});
+        for (const Entity e : r.view<const PointLight>().entities())
+            if (toggled.isNull() && !r.has<LightStandIn>(e)) toggled = e;
     } else {
         for (const Entity e : r.view<const PointLight, const LightStandIn>().entities())
             toggled = e;
@@ -298,18 +305,16 @@ void BM_FullShot(benchmark::State& state, const std::string& name) {
         state.SkipWithError("nothing to switch");
         return;
     }
-    const auto lit = [&] {
-        return punctual ? r.has<PointLight>(toggled) : !r.has<LightStandIn>(toggled);
-    };
+    const float intensity = punctual ? r.get<PointLight>(toggled).intensity : 0.f;
+    bool changed = false;
     const auto toggle = [&] {
-        if (punctual && lit())
-            r.remove<PointLight>(toggled);
-        else if (punctual)
-            r.emplace<PointLight>(toggled, PointLight{glm::vec3(1.f), 1.f});
-        else if (lit())
-            r.emplace<LightStandIn>(toggled);
-        else
+        changed = !changed;
+        if (punctual)
+            r.patch<PointLight>(toggled).intensity = changed ? 100.f * intensity : intensity;
+        else if (changed)
             r.remove<LightStandIn>(toggled);
+        else
+            r.emplace<LightStandIn>(toggled);
     };
     std::size_t fullFrames = 0;
     for (auto _ : state) {
@@ -317,11 +322,10 @@ void BM_FullShot(benchmark::State& state, const std::string& name) {
         w.still();
         fullFrames += w.system->lastFrame().full ? 1 : 0;
     }
-    if (lit()) { // leave the world as it was for the benchmarks after this one
+    if (changed) { // leave the world as it was for the benchmarks after this one
         toggle();
         w.still();
     }
-    if (punctual) r.destroy(toggled);
     if (fullFrames != std::size_t(state.iterations()))
         state.SkipWithError("a frame was not a full shot");
 }
@@ -436,6 +440,64 @@ void BM_LampSwitch(benchmark::State& state, const std::string& name) {
         w.still();
 }
 
+/// One run (Iterations(1)): still frames for a baseline, then a point light added at the
+/// scene's centre with a quarter of the lights' power, frames until its photons are all shot,
+/// then the light destroyed, frames until they are all empty.
+void BM_LightAdded(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    Registry& r = w.registry;
+    constexpr int kStillFrames = 10;
+    const glm::vec3 power = w.store().emittedPower;
+    const float intensity = 0.25f * (power.x + power.y + power.z) / (3.f * 4.f * glm::pi<float>());
+    const glm::vec3 centre = r.ctx().get<SceneInfo>().bounds.center();
+    struct Sweep {
+        double total = 0, worst = 0;
+        std::size_t frames = 0, fullShots = 0, gridRebuilds = 0;
+    };
+    // Frames until the light's photons are all re-shot (a frame that re-shoots none).
+    const auto sweep = [&] {
+        Sweep s;
+        do {
+            const double ms = w.still();
+            s.total += ms;
+            s.worst = std::max(s.worst, ms);
+            ++s.frames;
+            s.fullShots += w.system->lastFrame().full ? 1 : 0;
+            s.gridRebuilds += w.system->lastFrame().reindexedPaths >= w.store().pathCount();
+        } while (w.system->lastFrame().reshotPaths > 0 && s.frames < 10'000);
+        return s;
+    };
+    double still = 0, stillWorst = 0, added = 0;
+    Sweep on, off;
+    for (auto _ : state) {
+        for (int i = 0; i < kStillFrames; ++i) {
+            const double ms = w.still();
+            still += ms;
+            stillWorst = std::max(stillWorst, ms);
+        }
+        const Entity lamp = r.create();
+        r.emplace<WorldTransform>(lamp, WorldTransform{glm::translate(glm::mat4(1.f), centre)});
+        r.emplace<PointLight>(lamp, PointLight{glm::vec3(1.f), intensity});
+        const double before = double(w.store().pathCount());
+        on = sweep();
+        added = double(w.store().pathCount()) - before;
+        r.destroy(lamp);
+        off = sweep();
+        state.SetIterationTime((on.total + off.total) / 1000.0);
+    }
+    state.counters["added_photons"] = added;
+    state.counters["still_frame_ms"] = still / kStillFrames;
+    state.counters["still_worst_ms"] = stillWorst;
+    state.counters["add_frames"] = double(on.frames);
+    state.counters["add_frame_ms"] = on.total / double(on.frames);
+    state.counters["add_worst_ms"] = on.worst;
+    state.counters["remove_frames"] = double(off.frames);
+    state.counters["remove_frame_ms"] = off.total / double(off.frames);
+    state.counters["remove_worst_ms"] = off.worst;
+    state.counters["grid_rebuilds"] = double(on.gridRebuilds + off.gridRebuilds);
+    if (on.fullShots + off.fullShots > 0) state.SkipWithError("a frame was a full shot");
+}
+
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
@@ -525,10 +587,15 @@ int main(int argc, char** argv) {
             ->Unit(benchmark::kMillisecond);
         // The atrium's lamps switched off and on (the cornell box has none that shoot photons:
         // its luminaire is an emissive surface).
-        if (scene == "atrium")
+        if (scene == "atrium") {
             RegisterBenchmark(id("LampSwitch").c_str(), BM_LampSwitch, scene)
                 ->UseManualTime()
                 ->Unit(benchmark::kMillisecond);
+            RegisterBenchmark(id("LightAdded").c_str(), BM_LightAdded, scene)
+                ->Iterations(1)
+                ->UseManualTime()
+                ->Unit(benchmark::kMillisecond);
+        }
     }
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
