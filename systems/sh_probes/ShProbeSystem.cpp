@@ -103,6 +103,8 @@ void ShProbeSystem::build(Registry& registry) {
     mEnvironment = isFinite(info->environment) ? info->environment : glm::vec3(0.f);
     mStale.assign(mVolume->probeCount(), 0);
     mStaleCount = 0;
+    mLightCounts = {registry.count<PointLight>(), registry.count<SpotLight>(),
+                    registry.count<DirectionalLight>()};
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
     mFineTouched.clear(); // end points counted from the next delta on
     mFramesSinceHalving = 0;
@@ -437,6 +439,10 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         if (registry.has<PointLight>(e) || registry.has<SpotLight>(e) ||
             registry.has<DirectionalLight>(e))
             all = true;
+    const std::array<std::size_t, 3> lights{registry.count<PointLight>(),
+                                            registry.count<SpotLight>(),
+                                            registry.count<DirectionalLight>()};
+    if (std::exchange(mLightCounts, lights) != lights) all = true; // one removed
 
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
     if (delta && delta->full) all = true;

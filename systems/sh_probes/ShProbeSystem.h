@@ -11,6 +11,7 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <unordered_map>
@@ -177,6 +178,9 @@ private:
     // Snapshot of the scene the projection reads (rebuilt before each projection batch).
     std::vector<Surface> mSurfaces; ///< by Entity::index
     std::vector<Light> mLights;
+    /// Point, spot and directional lights in the registry at the last frame: one removed
+    /// (entity destroyed, component taken off) is no entry of the change lists.
+    std::array<std::size_t, 3> mLightCounts{};
 
     // Frame scratch.
     std::vector<std::uint32_t> mRefresh;

@@ -1138,10 +1138,21 @@ TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
 
 TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
     // With a budget of 0 nothing is refreshed, so staleCount() is what the frame marked.
-    enum class Trigger { None, FullDelta, LightIntensity, LightMoved, SpotAdded, SunAdded, Albedo };
+    enum class Trigger {
+        None,
+        FullDelta,
+        LightIntensity,
+        LightMoved,
+        SpotAdded,
+        SunAdded,
+        LightDestroyed,
+        LightComponentRemoved,
+        Albedo
+    };
     for (const Trigger trigger :
          {Trigger::None, Trigger::FullDelta, Trigger::LightIntensity, Trigger::LightMoved,
-          Trigger::SpotAdded, Trigger::SunAdded, Trigger::Albedo}) {
+          Trigger::SpotAdded, Trigger::SunAdded, Trigger::LightDestroyed,
+          Trigger::LightComponentRemoved, Trigger::Albedo}) {
         SCOPED_TRACE(int(trigger));
         MobileRoom room(0);
         Registry& w = room.world;
@@ -1163,6 +1174,12 @@ TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
             break;
         case Trigger::SunAdded:
             w.emplace<DirectionalLight>(w.create(), DirectionalLight{});
+            break;
+        case Trigger::LightDestroyed: // lights added and removed no longer force a full delta
+            w.destroy(light);
+            break;
+        case Trigger::LightComponentRemoved:
+            w.remove<PointLight>(light);
             break;
         case Trigger::Albedo:
             w.patch<Material>(room.cube).baseColor = glm::vec3(0.9f);
