@@ -55,6 +55,10 @@ struct PhotonEmitter {
     /// light component or emission gone, or an emissive mobile out of the world): dark, its
     /// photons waiting with their indices until it is listed again or a full shot drops it.
     bool absent = false;
+    /// Also absent: a stand-in the photon update made to hold a light's former photons when
+    /// the light was given new ones (its share dealt anew); it re-shoots them empty. No source
+    /// matches it.
+    bool ghost = false;
 
     // ---- derived (prepareEmitter) ------------------------------------------------------------
     glm::vec3 power{0.f};    ///< W emitted, linear RGB; 0 for a light that cannot emit

@@ -48,9 +48,11 @@ constexpr std::size_t kRebuildRecurringMultiple = 8;
 // How far a light's power per photon may drift from the mean before photons are shared anew
 // (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
 constexpr double kShareDrift = 4.0;
-// Lights added in play get photons appended to the store, up to this many times
-// PhotonSettings::photonCount in all.
-constexpr std::size_t kMaxStoreGrowth = 2;
+// Photons for lights added in play, and for shares dealt anew, come from ranges no light needs
+// any more, else from the store's end, up to this many times PhotonSettings::photonCount in
+// all: room for a share dealt anew (photonCount more) on top of lights added. A path that
+// holds nothing costs 8 bytes, and a few bits in the path grid.
+constexpr std::size_t kMaxStoreGrowth = 3;
 // reuseLandedPaths: a segment tested again lands where it did within this fraction of the
 // scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
 // it).
@@ -158,18 +160,20 @@ Aabb widened(const Aabb& box) {
     return {box.min - pad, box.max + pad};
 }
 
+double wattsOf(const glm::vec3& power) {
+    return double(power.x) + power.y + power.z;
+}
+
 /// Photon counts in proportion to each light's power (the sum of its RGB watts), summing to
 /// `photons`: largest remainders, so every count is within one of its exact share.
 void allocatePhotons(std::vector<PhotonEmitter>& emitters, std::uint32_t photons) {
     double total = 0.0;
     for (const PhotonEmitter& e : emitters)
-        total += double(e.power.x) + e.power.y + e.power.z;
+        total += wattsOf(e.power);
     std::vector<std::pair<double, std::size_t>> remainders;
     std::uint64_t given = 0;
     for (std::size_t i = 0; i < emitters.size(); ++i) {
-        const PhotonEmitter& e = emitters[i];
-        const double share =
-            total > 0.0 ? photons * ((double(e.power.x) + e.power.y + e.power.z) / total) : 0.0;
+        const double share = total > 0.0 ? photons * (wattsOf(emitters[i].power) / total) : 0.0;
         emitters[i].photonCount = std::uint32_t(std::floor(share));
         given += emitters[i].photonCount;
         if (share > 0.0) remainders.emplace_back(share - std::floor(share), i);
@@ -382,77 +386,184 @@ bool PhotonUpdateSystem::detectLightChanges(const Registry& registry, PhotonStor
     store.emittedPower = glm::vec3(0.f);
     for (const PhotonLight& light : store.lights)
         store.emittedPower += light.power;
-    return !addPhotons(store, grid) || sharesDrifted();
-}
-
-bool PhotonUpdateSystem::addPhotons(PhotonStore& store, PhotonPathGrid& grid) {
-    const auto watts = [](const glm::vec3& p) { return double(p.x) + p.y + p.z; };
-    double litPower = 0.0, litPhotons = 0.0, waiting = 0.0;
-    for (const PhotonEmitter& e : mEmitters) {
-        if (!carriesPower(e.power)) continue;
-        if (e.photonCount > 0) {
-            litPower += watts(e.power);
-            litPhotons += e.photonCount;
-        } else {
-            waiting += watts(e.power);
-        }
-    }
-    if (!(waiting > 0.0)) return true;
-    // Photons per watt: the lit lights', so every photon carries the same power; with none
-    // lit, the configured count spread over the new ones.
-    const double rate = litPhotons > 0.0 ? litPhotons / litPower : mSettings.photonCount / waiting;
-    const double room =
-        double(kMaxStoreGrowth) * mSettings.photonCount - double(store.paths.size());
-    const double scale = rate * waiting > room ? std::max(room, 0.0) / (rate * waiting) : 1.0;
-    if (scale * kShareDrift < 1.0) return false;
-    // Empty paths at the store's end, shot within the budget like a changed light's.
     const std::size_t before = store.paths.size();
-    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
-        PhotonEmitter& e = mEmitters[l];
-        if (!carriesPower(e.power) || e.photonCount > 0) continue;
-        const auto count = std::uint32_t(std::floor(scale * rate * watts(e.power) + 0.5));
-        if (count == 0) continue; // a share under half a photon
-        e.firstPhoton = std::uint32_t(store.paths.size());
-        e.photonCount = count;
-        store.lights[l].photonCount = count;
-        mSweeps[l] = Sweep{count, 0};
-        store.paths.resize(store.paths.size() + count, PhotonPath{0, 0, std::uint16_t(l)});
-    }
+    mergeFreeRanges(store);
+    if (!addPhotons(store) || !redealDrifted(store)) return true;
     mStats.addedPaths = store.paths.size() - before;
-    if (mStats.addedPaths == 0) return true;
-    mReshooting.resize((store.paths.size() + 63) / 64, 0);
-    mSpace.addEmptyPaths(store);
-    grid.addEmptyPaths(store);
-    return true;
-}
-
-bool PhotonUpdateSystem::sharesDrifted() const {
-    // Photons carry equal power only as shot: a light that has since brightened carries more per
-    // photon than the rest (noisier, not biased), and one that lit up from next to nothing may
-    // have no photons at all (its light would be missing). Each light's count is compared with
-    // its exact share of the photons now; a share under one photon is no share to keep.
-    // Lights switched off are left out: their photons wait for them, and the lights still on
-    // keep their shares of each other.
-    double total = 0.0, photons = 0.0;
-    for (const PhotonEmitter& e : mEmitters) {
-        if (!carriesPower(e.power)) continue;
-        total += double(e.power.x) + e.power.y + e.power.z;
-        photons += e.photonCount;
-    }
-    if (!(total > 0.0)) return false;  // all dark: nothing to share
-    if (!(photons > 0.0)) return true; // lights on, none with photons of its own
-    for (const PhotonEmitter& e : mEmitters) {
-        const double share = photons * (double(e.power.x) + e.power.y + e.power.z) / total;
-        if (share < 1.0) continue;
-        const double count = e.photonCount;
-        if (count * kShareDrift < share || count > kShareDrift * share) return true;
+    if (mStats.addedPaths > 0) {
+        mReshooting.resize((store.paths.size() + 63) / 64, 0);
+        mSpace.addEmptyPaths(store);
+        grid.addEmptyPaths(store);
     }
     return false;
 }
 
+void PhotonUpdateSystem::setRange(PhotonStore& store, std::size_t l, std::uint32_t first,
+                                  std::uint32_t count) {
+    mEmitters[l].firstPhoton = first;
+    mEmitters[l].photonCount = count;
+    store.lights[l].photonCount = count;
+}
+
+void PhotonUpdateSystem::handOver(PhotonStore& store, std::uint32_t first, std::uint32_t count,
+                                  std::size_t owner) {
+    for (std::uint32_t p = first; p < first + count; ++p)
+        store.paths[p].light = std::uint16_t(owner);
+}
+
+void PhotonUpdateSystem::mergeFreeRanges(PhotonStore& store) {
+    mFree.clear();
+    for (std::size_t l = 0; l < mEmitters.size(); ++l)
+        if (mEmitters[l].absent && mSweeps[l].remaining == 0 && mEmitters[l].photonCount > 0)
+            mFree.push_back(l);
+    std::sort(mFree.begin(), mFree.end(), [&](std::size_t a, std::size_t b) {
+        return mEmitters[a].firstPhoton < mEmitters[b].firstPhoton;
+    });
+    std::size_t kept = 0;
+    for (const std::size_t l : mFree) {
+        if (kept > 0) {
+            const std::size_t a = mFree[kept - 1];
+            const PhotonEmitter& left = mEmitters[a];
+            if (left.firstPhoton + left.photonCount == mEmitters[l].firstPhoton) {
+                handOver(store, mEmitters[l].firstPhoton, mEmitters[l].photonCount, a);
+                setRange(store, a, left.firstPhoton, left.photonCount + mEmitters[l].photonCount);
+                setRange(store, l, 0, 0);
+                continue;
+            }
+        }
+        mFree[kept++] = l;
+    }
+    mFree.resize(kept);
+}
+
+std::uint32_t PhotonUpdateSystem::roomFor(const PhotonStore& store, std::uint32_t count) const {
+    const std::size_t limit = kMaxStoreGrowth * std::size_t(mSettings.photonCount);
+    std::size_t room = limit > store.paths.size() ? limit - store.paths.size() : 0;
+    for (const std::size_t l : mFree)
+        room = std::max<std::size_t>(room, mEmitters[l].photonCount);
+    return std::uint32_t(std::min<std::size_t>(room, count));
+}
+
+void PhotonUpdateSystem::takeRange(PhotonStore& store, std::size_t owner, std::uint32_t count) {
+    QGI_ASSERT(count > 0 && roomFor(store, count) == count, "no room for ", count, " photons");
+    // The smallest free range that holds them, else the store's end.
+    std::size_t best = mFree.size();
+    for (std::size_t i = 0; i < mFree.size(); ++i) {
+        const std::uint32_t size = mEmitters[mFree[i]].photonCount;
+        if (size >= count && (best == mFree.size() || size < mEmitters[mFree[best]].photonCount))
+            best = i;
+    }
+    std::uint32_t first = 0;
+    if (best < mFree.size()) {
+        const std::size_t donor = mFree[best];
+        first = mEmitters[donor].firstPhoton;
+        setRange(store, donor, first + count, mEmitters[donor].photonCount - count);
+        if (mEmitters[donor].photonCount == 0) mFree.erase(mFree.begin() + std::ptrdiff_t(best));
+        handOver(store, first, count, owner);
+    } else {
+        first = std::uint32_t(store.paths.size());
+        store.paths.resize(store.paths.size() + count, PhotonPath{0, 0, std::uint16_t(owner)});
+    }
+    setRange(store, owner, first, count);
+    mSweeps[owner] = Sweep{count, 0};
+}
+
+bool PhotonUpdateSystem::retire(PhotonStore& store, std::size_t l) {
+    const std::uint32_t first = mEmitters[l].firstPhoton, count = mEmitters[l].photonCount;
+    if (count == 0) return true;
+    // A ghost with nothing left to do takes them, else a new one.
+    std::size_t g = 0;
+    while (g < mEmitters.size() &&
+           !(mEmitters[g].ghost && mEmitters[g].photonCount == 0 && mSweeps[g].remaining == 0))
+        ++g;
+    if (g == mEmitters.size()) {
+        if (g >= kMaxLights) return false;
+        mEmitters.emplace_back();
+        mSweeps.emplace_back();
+        store.lights.emplace_back();
+    }
+    PhotonEmitter ghost;
+    ghost.kind = mEmitters[l].kind;
+    ghost.absent = ghost.ghost = true;
+    ghost.directDrawn = mEmitters[l].directDrawn; // its photons are counted as they were
+    mEmitters[g] = std::move(ghost);
+    store.lights[g] = PhotonLight{Entity{}, glm::vec3(0.f), 0, mEmitters[g].directDrawn};
+    handOver(store, first, count, g);
+    setRange(store, g, first, count);
+    mSweeps[g] = Sweep{count, 0};
+    setRange(store, l, 0, 0);
+    mSweeps[l] = Sweep{};
+    return true;
+}
+
+bool PhotonUpdateSystem::addPhotons(PhotonStore& store) {
+    double litPower = 0.0, litPhotons = 0.0, waiting = 0.0;
+    for (const PhotonEmitter& e : mEmitters) {
+        if (!carriesPower(e.power)) continue;
+        if (e.photonCount > 0) {
+            litPower += wattsOf(e.power);
+            litPhotons += e.photonCount;
+        } else {
+            waiting += wattsOf(e.power);
+        }
+    }
+    if (!(waiting > 0.0)) return true;
+    // Photons per watt: the lit lights', so every photon carries the same power; with none
+    // lit, the configured count spread over the new ones. A light short of room takes what
+    // there is, down to a quarter of its share (the drift sharesDrifted tolerates).
+    const double rate = litPhotons > 0.0 ? litPhotons / litPower : mSettings.photonCount / waiting;
+    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
+        const PhotonEmitter& e = mEmitters[l];
+        if (!carriesPower(e.power) || e.photonCount > 0) continue;
+        const auto wanted =
+            std::uint32_t(std::min(std::floor(rate * wattsOf(e.power) + 0.5),
+                                   double(kMaxStoreGrowth) * mSettings.photonCount));
+        if (wanted == 0) continue; // a share under half a photon
+        const std::uint32_t count = roomFor(store, wanted);
+        if (double(count) * kShareDrift < double(wanted)) return false;
+        takeRange(store, l, count);
+    }
+    return true;
+}
+
+bool PhotonUpdateSystem::redealDrifted(PhotonStore& store) {
+    // Photons carry equal power only as dealt: a light that has since brightened carries more
+    // per photon than the rest (noisier, not biased), one dimmed holds photons the others
+    // could use. Each light's count is compared with its exact share of the lit lights'
+    // photons; a share under one photon is no share to keep. Lights switched off are left
+    // out: their photons wait for them, and the lights still on keep their shares of each
+    // other.
+    double total = 0.0, photons = 0.0;
+    for (const PhotonEmitter& e : mEmitters) {
+        if (!carriesPower(e.power)) continue;
+        total += wattsOf(e.power);
+        photons += e.photonCount;
+    }
+    if (!(total > 0.0) || !(photons > 0.0)) return true;
+    mDrifted.clear();
+    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
+        const PhotonEmitter& e = mEmitters[l];
+        if (!carriesPower(e.power)) continue;
+        const double share = photons * wattsOf(e.power) / total;
+        const double count = e.photonCount;
+        if (share >= 1.0 && (count * kShareDrift < share || count > kShareDrift * share))
+            mDrifted.emplace_back(l, std::uint32_t(std::floor(share + 0.5)));
+    }
+    // Each drifted light's photons go dark (a ghost re-shoots them empty) while its share is
+    // shot from a range of its own: its light fades from the old photons to the new.
+    for (const auto& [l, share] : mDrifted)
+        if (!retire(store, l)) return false;
+    for (const auto& [l, share] : mDrifted) {
+        if (roomFor(store, share) < share) return false;
+        takeRange(store, l, share);
+    }
+    mStats.redealtLights = mDrifted.size();
+    return true;
+}
+
 bool PhotonUpdateSystem::litByDirectionalLight() const {
     return std::any_of(mEmitters.begin(), mEmitters.end(), [](const PhotonEmitter& e) {
-        return e.kind == EmitterKind::Directional && e.photonCount > 0;
+        return e.kind == EmitterKind::Directional && !e.absent && e.photonCount > 0;
     });
 }
 

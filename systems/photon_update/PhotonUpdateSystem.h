@@ -109,7 +109,8 @@ public:
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
         std::size_t retestedSegments = 0; ///< segments tested again: did they land?
         std::size_t reshotPaths = 0;    ///< re-shot because their light changed
-        std::size_t addedPaths = 0;     ///< appended for lights that had no photons
+        std::size_t addedPaths = 0;     ///< appended to the store (lights added, shares dealt anew)
+        std::size_t redealtLights = 0;  ///< lights given new photons: 4x off their share
         std::size_t tracedSegments = 0;
         std::size_t reindexedPaths = 0; ///< by the path grid's refresh
         bool compacted = false;         ///< the whole store laid out again
@@ -185,16 +186,36 @@ private:
     /// changed what hybrid mode counts, the new lights found no room, or the lights' powers
     /// drifted from their photon shares (sharesDrifted).
     bool detectLightChanges(const Registry& registry, PhotonStore& store, PhotonPathGrid& grid);
-    /// Appends photons for every shining light that has none, at the lit lights' power per
-    /// photon, within the store's room; false when some would get under 1/kShareDrift of its
-    /// share (the photons must be shared anew).
-    bool addPhotons(PhotonStore& store, PhotonPathGrid& grid);
+    /// Gives photons to every shining light that has none, at the lit lights' power per
+    /// photon (takeRange); false when one would get under 1/kShareDrift of its share for want
+    /// of room (a full shot is due).
+    bool addPhotons(PhotonStore& store);
+    /// Each shining light whose photon count is more than kShareDrift times above or below its
+    /// exact share of the lit lights' photons (a share of one photon or more) hands its
+    /// photons to a ghost (retire) and takes a range of its share. False when there is no
+    /// room (a full shot is due).
+    bool redealDrifted(PhotonStore& store);
+    /// Photon ranges. A *free* range belongs to an absent light (removed, or a ghost) whose
+    /// photons are all re-shot empty: its paths hold nothing and it can be handed on.
+    /// mergeFreeRanges lists them in mFree, neighbours merged into one.
+    void mergeFreeRanges(PhotonStore& store);
+    /// The most photons, up to `count`, that takeRange can give one light: the largest free
+    /// range, or what the store may still grow by (kMaxStoreGrowth).
+    std::uint32_t roomFor(const PhotonStore& store, std::uint32_t count) const;
+    /// Gives light `owner` (which has none) `count` photons, all empty paths, and starts its
+    /// sweep: the smallest free range that holds them, else appended. count <= roomFor.
+    void takeRange(PhotonStore& store, std::size_t owner, std::uint32_t count);
+    /// Hands light l's photons to a ghost, which re-shoots them empty within the budget (the
+    /// light's old light fades while its new photons are shot); false when no emitter slot is
+    /// left (kMaxLights).
+    bool retire(PhotonStore& store, std::size_t l);
+    void setRange(PhotonStore& store, std::size_t l, std::uint32_t first, std::uint32_t count);
+    /// Photons [first, first + count) now belong to emitter `owner` (PhotonPath::light).
+    static void handOver(PhotonStore& store, std::uint32_t first, std::uint32_t count,
+                         std::size_t owner);
     /// The index of the light shot from `source` (same kind and entity), or -1.
     std::int64_t emitterOf(const PhotonEmitter& source) const;
     void indexEmitters();
-    /// Whether a light's photon count is more than kShareDrift times above or below its exact
-    /// share of the photons at the lights' present powers (shares under one photon aside).
-    bool sharesDrifted() const;
     std::uint64_t mStandIns = 0;      ///< standInSignature at the last check
     /// Surfaces whose albedo changed since they were traced (a patched Material): mEdits, with
     /// mAlbedo brought up to date.
@@ -260,6 +281,8 @@ private:
     std::vector<PhotonEmitter> mSources;
     std::vector<std::int64_t> mSourceOf; ///< per emitter: its source this frame, or -1
     std::vector<std::size_t> mAdded;     ///< sources with no emitter yet
+    std::vector<std::size_t> mFree;      ///< emitters holding free ranges (mergeFreeRanges)
+    std::vector<std::pair<std::size_t, std::uint32_t>> mDrifted; ///< light and its share
     std::vector<MovedMobile> mMoved;
     /// A surface whose albedo was edited this frame, and its world bounds, slightly widened.
     struct AlbedoEdit {

@@ -676,7 +676,7 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
     std::mt19937 rng(2024);
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     glm::vec3 cube = kCubeRest;
-    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0, edits = 0, added = 0;
+    std::size_t retraced = 0, landed = 0, reshotWithMoves = 0, edits = 0, added = 0, reshares = 0;
     Entity lamp;
     for (int frame = 1; frame <= 100; ++frame) {
         const float pick = unit(rng);
@@ -706,7 +706,10 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
         // budget, then re-shot empty.
         if (frame == 30) lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 5.f);
         if (frame == 55) registry.destroy(lamp);
-        if (frame == 75) test::addPointLight(registry, {0.5f, 0.3f, -1.f}, 3.f);
+        if (frame == 75) lamp = test::addPointLight(registry, {0.5f, 0.3f, -1.f}, 3.f);
+        // The room light ten times brighter: the lamp holds 8x its share, so its photons are
+        // dealt anew.
+        if (frame == 85) registry.patch<PointLight>(room.light).intensity *= 10.f;
         if (frame % 20 == 7) { // a surface repainted: the pillar, then the cube, in turn
             const float red = 0.2f + 0.6f * unit(rng);
             registry.patch<Material>(frame % 40 == 7 ? room.pillar : room.cube).baseColor =
@@ -724,6 +727,7 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
         if (stats.reshotPaths > 0 && stats.retracedPaths > 0) ++reshotWithMoves;
         edits += stats.editedSurfaces;
         added += stats.addedPaths;
+        reshares += stats.redealtLights;
         const glm::dvec3 after = impactPower(storeOf(registry));
         const glm::dvec3 expected = before -
                                     impactPower(delta.oldSegments, 0, delta.oldSegments.size()) +
@@ -749,14 +753,19 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
         }
     }
     // Every kind of change happened: paths re-traced, landings kept, the lights' re-shoots in
-    // frames where mobiles moved too, repainted surfaces and lamps added (10,000 and 6,000
-    // photons at the room light's 10 W/sr per 20,000).
+    // frames where mobiles moved too, repainted surfaces, lamps added (10,000 photons
+    // appended at the room light's 10 W/sr per 20,000; the second lamp's 6,000 from the
+    // first's), and the second lamp's photons dealt anew (757 of the 26,000 lit photons, from
+    // the first lamp's photons left).
     EXPECT_GT(retraced, 10'000u);
     EXPECT_GT(landed, 1'000u);
     EXPECT_GE(reshotWithMoves, 6u);
     EXPECT_EQ(edits, 5u);
-    EXPECT_EQ(added, 16'000u);
-    EXPECT_EQ(storeOf(registry).pathCount(), 36'000u);
+    EXPECT_EQ(reshares, 1u);
+    EXPECT_EQ(added, 10'000u);
+    EXPECT_EQ(storeOf(registry).pathCount(), 30'000u);
+    EXPECT_EQ(storeOf(registry).lights[0].photonCount, 20'000u);
+    EXPECT_EQ(storeOf(registry).lights[2].photonCount, 757u); // the second lamp
 }
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
@@ -1391,11 +1400,11 @@ TEST(PhotonUpdate, AnAddedLightGetsPhotonsAtTheSamePowerPerPhotonShotWithinTheBu
     EXPECT_TRUE(sameStore(store, storeOf(fresh)));
 }
 
-TEST(PhotonUpdate, ARemovedLightGoesDarkWithinTheBudgetAndTheStoreGrowsAtMostTwofold) {
-    // A lamp destroyed in play keeps its photons, re-shot empty; lights added later are
-    // appended while the store has room (twice photonCount). One that would get under a
-    // quarter of its share there has the photons shared anew: a full shot, which drops the
-    // removed lamp.
+TEST(PhotonUpdate, ARemovedLightsPhotonsGoDarkAndAreHandedOnAndTheStoreGrowsAtMostThreefold) {
+    // A lamp destroyed in play keeps its photons, re-shot empty; then they are free, and a
+    // light added later that fits takes them. Others are appended while the store has room
+    // (three times photonCount). One that would get under a quarter of its share has the
+    // photons shared anew at once: a full shot, which drops the removed lamp.
     PhotonSettings settings = settingsWith(4'000);
     settings.reshootBudget = 100'000;
     Registry registry;
@@ -1423,23 +1432,44 @@ TEST(PhotonUpdate, ARemovedLightGoesDarkWithinTheBudgetAndTheStoreGrowsAtMostTwo
         }
     }
 
-    // 30 W/sr at 2,000 photons per 10 W/sr wants 6,000: the 4,000 left of the room will do
-    // (two thirds of its share); then 10 W/sr more finds no room.
-    test::addPointLight(registry, {1.f, 0.5f, -1.f}, 30.f);
-    EXPECT_EQ(reshotPerFrame(registry, system, frame, 1), std::vector<std::size_t>{4'000});
-    EXPECT_EQ(storeOf(registry).pathCount(), 8'000u);
-    EXPECT_EQ(storeOf(registry).lights[2].photonCount, 4'000u);
-    test::addPointLight(registry, {0.5f, 0.5f, 0.5f}, 10.f);
+    // 30 W/sr at 2,000 photons per 10 W/sr wants 6,000: more than the lamp's 2,000 free
+    // photons, so appended; 10 W/sr more wants 2,000, and takes the lamp's.
+    const Entity big = test::addPointLight(registry, {1.f, 0.5f, -1.f}, 30.f);
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 1), std::vector<std::size_t>{6'000});
+    EXPECT_EQ(storeOf(registry).pathCount(), 10'000u);
+    EXPECT_EQ(storeOf(registry).lights[2].photonCount, 6'000u);
+    const Entity small = test::addPointLight(registry, {0.5f, 0.5f, 0.5f}, 10.f);
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 1), std::vector<std::size_t>{2'000});
+    EXPECT_EQ(system.lastFrame().addedPaths, 0u);
+    {
+        const PhotonStore& store = storeOf(registry);
+        EXPECT_EQ(store.pathCount(), 10'000u);
+        ASSERT_EQ(store.lights.size(), 4u);
+        EXPECT_EQ(store.lights[1].photonCount, 0u); // the removed lamp's, handed on
+        EXPECT_EQ(store.lights[3].photonCount, 2'000u);
+        for (std::uint32_t p = 2'000; p < 4'000; ++p) {
+            ASSERT_EQ(store.paths[p].light, 3u) << "photon " << p;
+            ASSERT_GT(store.paths[p].count, 0u) << "photon " << p;
+        }
+    }
+
+    // 100 W/sr wants 20,000: 2,000 of room is under a quarter of that.
+    const Entity huge = test::addPointLight(registry, {-0.5f, 0.5f, 0.5f}, 100.f);
     system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
     registry.clearChanges();
     EXPECT_TRUE(deltaOf(registry).full);
     const PhotonStore& store = storeOf(registry);
     EXPECT_EQ(store.pathCount(), 4'000u);
-    ASSERT_EQ(store.lights.size(), 3u); // the room's light and the two added
-    EXPECT_EQ(store.lights[0].entity, room.light);
-    EXPECT_EQ(store.lights[0].photonCount, 800u);
-    EXPECT_EQ(store.lights[1].photonCount, 2'400u);
-    EXPECT_EQ(store.lights[2].photonCount, 800u);
+    ASSERT_EQ(store.lights.size(), 4u); // the removed lamp dropped
+    const std::array<std::pair<Entity, float>, 4> lights{
+        {{room.light, 10.f}, {big, 30.f}, {small, 10.f}, {huge, 100.f}}};
+    std::uint32_t total = 0;
+    for (std::size_t l = 0; l < lights.size(); ++l) {
+        EXPECT_EQ(store.lights[l].entity, lights[l].first);
+        EXPECT_NEAR(double(store.lights[l].photonCount), 4'000.0 * lights[l].second / 150.0, 1.0);
+        total += store.lights[l].photonCount;
+    }
+    EXPECT_EQ(total, 4'000u);
 }
 
 TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
@@ -1467,7 +1497,7 @@ TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
 TEST(PhotonUpdate, ALightThatDriftsFarFromItsPhotonShareIsSharedAnew) {
     // A lamp shot while nearly off gets no photons; brightened, it gets its share appended.
     // A drift under 4x from the shares is kept; the room's light dimmed a hundredfold holds
-    // far more photons than its share: they are shared anew.
+    // far more photons than its share: they are dealt anew, progressively (no full shot).
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
     const Entity lamp = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 1e-6f);
@@ -1487,11 +1517,33 @@ TEST(PhotonUpdate, ALightThatDriftsFarFromItsPhotonShareIsSharedAnew) {
     reshotPerFrame(registry, system, frame, 1);
     EXPECT_EQ(storeOf(registry).lights[1].photonCount, 4'000u);
 
+    // Dealt anew within the budget: the room light's 4,000 photons go dark while it is given
+    // its share of the lit lights' 8,000 (0.1 of 20.1 W/sr: 40) at the store's end; the lamp,
+    // within 4x of its share, keeps its own.
     registry.patch<PointLight>(room.light).intensity = roomIntensity / 100.f;
-    system.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
-    EXPECT_TRUE(deltaOf(registry).full);
-    EXPECT_EQ(storeOf(registry).pathCount(), 4'000u);
-    EXPECT_EQ(storeOf(registry).lights[0].photonCount, 20u); // 0.1 of 20.1 W/sr
+    reshotPerFrame(registry, system, frame, 1);
+    EXPECT_EQ(system.lastFrame().redealtLights, 1u);
+    {
+        const PhotonStore& store = storeOf(registry);
+        EXPECT_EQ(store.pathCount(), 8'040u);
+        EXPECT_EQ(store.lights[0].photonCount, 40u);
+        EXPECT_EQ(store.lights[1].photonCount, 4'000u);
+        for (std::uint32_t p = 0; p < 8'040; ++p) // the budget covered every photon
+            ASSERT_EQ(store.paths[p].count > 0, p >= 4'000) << "photon " << p;
+    }
+    // Dealt anew again (0.1 W/sr against the lamp's 0.2: a third of 4,040): the room light's
+    // old 4,000 photons, dark now, hold the new ones.
+    registry.patch<PointLight>(lamp).intensity = roomIntensity / 50.f;
+    reshotPerFrame(registry, system, frame, 1);
+    EXPECT_EQ(system.lastFrame().redealtLights, 1u);
+    EXPECT_EQ(system.lastFrame().addedPaths, 0u);
+    const PhotonStore& store = storeOf(registry);
+    EXPECT_EQ(store.pathCount(), 8'040u);
+    EXPECT_EQ(store.lights[0].photonCount, 1'347u);
+    EXPECT_EQ(store.lights[0].photonCount + store.lights[1].photonCount, 5'347u);
+    for (std::uint32_t p = 0; p < 8'040; ++p)
+        ASSERT_EQ(store.paths[p].count > 0, p < 1'347 || (p >= 4'000 && p < 8'000))
+            << "photon " << p;
 }
 
 TEST(PhotonUpdate, AStandInAddedOrMovedAwayChangesWhatHybridModeCounts) {
