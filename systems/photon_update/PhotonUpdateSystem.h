@@ -30,10 +30,9 @@ class PhotonPathGrid;
 /** Keeps the photon ray set in step with the scene every frame (seed 000 sections 2.2-2.3,
  *  with seed 004's emission, frame-coherent seeding and progressive refinement).
  *
- *  Full shot (first frame; a light whose power drifted since the last full shot until its
- *  photon count is 4x above or below its share of the lit lights' photons (a share of one
- *  photon or more); lights added in play that the store has no room for (below); an emissive
- *  surface gaining or losing its light stand-in; every frame with fullRecompute):
+ *  Full shot (first frame; lights given photons in play that the store has no room for
+ *  (below); an emissive surface gaining or losing its light stand-in; every frame with
+ *  fullRecompute):
  *  photons shared among the lights in proportion to power, every path traced, the path grid
  *  built (not with fullRecompute: it would cost more than it saves there, 0.4 to 1.3 times
  *  the tracing against a few per cent of DETP's full estimate; it is left empty,
@@ -74,10 +73,18 @@ class PhotonPathGrid;
  *     kept, absent and dark, until it is listed again or a full shot drops it.
  *   - Lights added (or lighting up without photons of their own): each gets photons at the
  *     power per photon of the lights that have some (with none lit, photonCount over the new
- *     lights), appended to the store and shot within the same budget, so the light fades in
- *     over photons / reshootBudget frames. The store grows to at most twice photonCount;
- *     lights that would get less than a quarter of their share within that have the photons
- *     shared anew (a full shot, which also drops removed lights).
+ *     lights), shot within the same budget, so the light fades in over photons /
+ *     reshootBudget frames.
+ *   - Lights whose power drifted until their photon count is 4x above or below their share
+ *     of the lit lights' photons (a share of one photon or more): each is dealt its share
+ *     anew. Its old photons go to a *ghost* (an emitter no source matches, dark), which
+ *     re-shoots them empty within the budget while the new ones are shot: its light fades
+ *     from the old photons to the new. The other lights keep theirs.
+ *   Photons a light takes come from *free* ranges first (those of removed lights and ghosts
+ *   once all re-shot empty; neighbours merged), else are appended to the store, which grows
+ *   to at most three times photonCount. A light that would get under a quarter of its share
+ *   for want of room has every photon shot anew (a full shot, which also drops removed lights
+ *   and ghosts).
  *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
  *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
  *  needs a new RayScene and a new system. So is the box directional lights cover

@@ -12,10 +12,8 @@
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
-//  - FullShot/<scene>: a frame that re-shoots every photon in play, path grid and full
-//    estimate included: the photons shared anew among the lights (atrium: a lamp 100 times
-//    brighter, then back, far from its photon share; cornell: its luminaire gaining or losing
-//    its light stand-in, which changes what hybrid mode counts).
+//  - FullShot/<scene>: a frame that shoots every photon, path grid and full estimate included
+//    (a new system's first frame on the world as it stands): what a full shot costs in play.
 //  - AlbedoEdit/<scene>/<mobile|floor>: a frame after the albedo of the first mobile, or of
 //    the floor, was edited (the paths that hit it re-traced; for the floor, the grid rebuilt).
 //  - GridBuild/<scene>: the path grid indexing the whole shot ray set (every full shot builds
@@ -23,10 +21,12 @@
 //  - LampSwitch/atrium: frames while the lamps are switched off and on again (their photons
 //    re-shot within the budget), mean and worst; against FullShot, what a switch cost when it
 //    shot every photon anew.
+//  - LampRedealt/atrium: a lamp a hundred times brighter, then back, each time dealt new
+//    photons within the budget (its count 4x off its share): frames until each sweep ends.
 //  - LightAdded/atrium: a point light with a quarter of the lights' power added in play (its
-//    photons appended and shot within the budget), then destroyed (re-shot empty): frames
-//    until each sweep ends, mean and worst, against still frames of the same run. Last: it
-//    leaves the store grown.
+//    photons taken from free ranges or appended, and shot within the budget), then destroyed
+//    (re-shot empty): frames until each sweep ends, mean and worst, against still frames of
+//    the same run. These two come last: they leave the store grown.
 #include "components/LightStandIn.h"
 #include "components/Material.h"
 #include "components/MobileMesh.h"
@@ -287,44 +287,16 @@ void BM_GridBuild(benchmark::State& state, const std::string& name) {
 /// a point light is added at the scene's centre or removed again; without them (the cornell
 /// box in photon mode) its lamp's stand-in tag comes off or back, so the luminaire's first
 /// bounce is counted or not.
+/// A full shot in play: what a new PhotonUpdateSystem's first frame costs on the world as it
+/// stands (every photon traced, the path grid built, DETP's full estimate), now needed only
+/// when the lights' photons cannot be dealt within the store's room.
 void BM_FullShot(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
-    Registry& r = w.registry;
-    const bool punctual = w.system->settings().punctualLights;
-    // Punctual lights: the first lamp (not a stand-in), a hundred times brighter and back, its
-    // photon count 4x off its share each time. Otherwise a stand-in tagged and untagged.
-    Entity toggled;
-    if (punctual) {
-        for (const Entity e : r.view<const PointLight>().entities())
-            if (toggled.isNull() && !r.has<LightStandIn>(e)) toggled = e;
-    } else {
-        for (const Entity e : r.view<const PointLight, const LightStandIn>().entities())
-            toggled = e;
-    }
-    if (toggled.isNull()) {
-        state.SkipWithError("nothing to switch");
-        return;
-    }
-    const float intensity = punctual ? r.get<PointLight>(toggled).intensity : 0.f;
-    bool changed = false;
-    const auto toggle = [&] {
-        changed = !changed;
-        if (punctual)
-            r.patch<PointLight>(toggled).intensity = changed ? 100.f * intensity : intensity;
-        else if (changed)
-            r.remove<LightStandIn>(toggled);
-        else
-            r.emplace<LightStandIn>(toggled);
-    };
     std::size_t fullFrames = 0;
     for (auto _ : state) {
-        toggle();
+        w.system = std::make_unique<PhotonUpdateSystem>(w.system->settings());
         w.still();
         fullFrames += w.system->lastFrame().full ? 1 : 0;
-    }
-    if (changed) { // leave the world as it was for the benchmarks after this one
-        toggle();
-        w.still();
     }
     if (fullFrames != std::size_t(state.iterations()))
         state.SkipWithError("a frame was not a full shot");
@@ -440,9 +412,40 @@ void BM_LampSwitch(benchmark::State& state, const std::string& name) {
         w.still();
 }
 
+/// Frames of a light's photons being re-shot, until a frame re-shoots none.
+struct Sweep {
+    double total = 0, worst = 0;
+    std::size_t frames = 0, fullShots = 0, gridRebuilds = 0;
+};
+
+Sweep sweepFrames(PhotonWorld& w) {
+    Sweep s;
+    do {
+        const double ms = w.still();
+        s.total += ms;
+        s.worst = std::max(s.worst, ms);
+        ++s.frames;
+        s.fullShots += w.system->lastFrame().full ? 1 : 0;
+        s.gridRebuilds += w.system->lastFrame().reindexedPaths >= w.store().pathCount() ? 1 : 0;
+    } while (w.system->lastFrame().reshotPaths > 0 && s.frames < 10'000);
+    return s;
+}
+
+/// Counters for two sweeps (`on`: the change, `off`: back); fails the benchmark on a full shot.
+void reportSweeps(benchmark::State& state, const Sweep& on, const Sweep& off) {
+    state.counters["on_frames"] = double(on.frames);
+    state.counters["on_frame_ms"] = on.total / double(on.frames);
+    state.counters["on_worst_ms"] = on.worst;
+    state.counters["off_frames"] = double(off.frames);
+    state.counters["off_frame_ms"] = off.total / double(off.frames);
+    state.counters["off_worst_ms"] = off.worst;
+    state.counters["grid_rebuilds"] = double(on.gridRebuilds + off.gridRebuilds);
+    if (on.fullShots + off.fullShots > 0) state.SkipWithError("a frame was a full shot");
+}
+
 /// One run (Iterations(1)): still frames for a baseline, then a point light added at the
-/// scene's centre with a quarter of the lights' power, frames until its photons are all shot,
-/// then the light destroyed, frames until they are all empty.
+/// scene's centre with a quarter of the lights' power, frames until its photons are all shot
+/// (`on`), then the light destroyed, frames until they are all empty (`off`).
 void BM_LightAdded(benchmark::State& state, const std::string& name) {
     PhotonWorld& w = world(name);
     Registry& r = w.registry;
@@ -450,52 +453,57 @@ void BM_LightAdded(benchmark::State& state, const std::string& name) {
     const glm::vec3 power = w.store().emittedPower;
     const float intensity = 0.25f * (power.x + power.y + power.z) / (3.f * 4.f * glm::pi<float>());
     const glm::vec3 centre = r.ctx().get<SceneInfo>().bounds.center();
-    struct Sweep {
-        double total = 0, worst = 0;
-        std::size_t frames = 0, fullShots = 0, gridRebuilds = 0;
-    };
-    // Frames until the light's photons are all re-shot (a frame that re-shoots none).
-    const auto sweep = [&] {
-        Sweep s;
-        do {
-            const double ms = w.still();
-            s.total += ms;
-            s.worst = std::max(s.worst, ms);
-            ++s.frames;
-            s.fullShots += w.system->lastFrame().full ? 1 : 0;
-            s.gridRebuilds += w.system->lastFrame().reindexedPaths >= w.store().pathCount();
-        } while (w.system->lastFrame().reshotPaths > 0 && s.frames < 10'000);
-        return s;
-    };
-    double still = 0, stillWorst = 0, added = 0;
+    double still = 0, added = 0;
     Sweep on, off;
     for (auto _ : state) {
-        for (int i = 0; i < kStillFrames; ++i) {
-            const double ms = w.still();
-            still += ms;
-            stillWorst = std::max(stillWorst, ms);
-        }
+        for (int i = 0; i < kStillFrames; ++i)
+            still += w.still();
         const Entity lamp = r.create();
         r.emplace<WorldTransform>(lamp, WorldTransform{glm::translate(glm::mat4(1.f), centre)});
         r.emplace<PointLight>(lamp, PointLight{glm::vec3(1.f), intensity});
         const double before = double(w.store().pathCount());
-        on = sweep();
+        on = sweepFrames(w);
         added = double(w.store().pathCount()) - before;
         r.destroy(lamp);
-        off = sweep();
+        off = sweepFrames(w);
         state.SetIterationTime((on.total + off.total) / 1000.0);
     }
-    state.counters["added_photons"] = added;
+    state.counters["appended_photons"] = added;
     state.counters["still_frame_ms"] = still / kStillFrames;
-    state.counters["still_worst_ms"] = stillWorst;
-    state.counters["add_frames"] = double(on.frames);
-    state.counters["add_frame_ms"] = on.total / double(on.frames);
-    state.counters["add_worst_ms"] = on.worst;
-    state.counters["remove_frames"] = double(off.frames);
-    state.counters["remove_frame_ms"] = off.total / double(off.frames);
-    state.counters["remove_worst_ms"] = off.worst;
-    state.counters["grid_rebuilds"] = double(on.gridRebuilds + off.gridRebuilds);
-    if (on.fullShots + off.fullShots > 0) state.SkipWithError("a frame was a full shot");
+    reportSweeps(state, on, off);
+}
+
+/// One run (Iterations(1)): the first lamp (not a stand-in) a hundred times brighter, far
+/// past its photon share, so it is dealt new photons (`on`); then back (`off`), dealt anew
+/// again. Frames until each sweep ends.
+void BM_LampRedealt(benchmark::State& state, const std::string& name) {
+    PhotonWorld& w = world(name);
+    Registry& r = w.registry;
+    Entity lamp;
+    for (const Entity e : r.view<const PointLight>().entities())
+        if (lamp.isNull() && !r.has<LightStandIn>(e)) lamp = e;
+    if (lamp.isNull()) {
+        state.SkipWithError("no lamp");
+        return;
+    }
+    const float intensity = r.get<PointLight>(lamp).intensity;
+    double ghosts = 0, before = 0, brightened = 0;
+    Sweep on, off;
+    for (auto _ : state) {
+        before = double(w.store().lights.size());
+        r.patch<PointLight>(lamp).intensity = 100.f * intensity;
+        on = sweepFrames(w);
+        for (const PhotonLight& light : w.store().lights)
+            if (light.entity == lamp) brightened = double(light.photonCount);
+        r.patch<PointLight>(lamp).intensity = intensity;
+        off = sweepFrames(w);
+        ghosts = double(w.store().lights.size()) - before;
+        state.SetIterationTime((on.total + off.total) / 1000.0);
+    }
+    state.counters["lamp_photons_brightened"] = brightened;
+    state.counters["ghosts"] = ghosts;
+    state.counters["paths"] = double(w.store().pathCount());
+    reportSweeps(state, on, off);
 }
 
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
@@ -589,6 +597,10 @@ int main(int argc, char** argv) {
         // its luminaire is an emissive surface).
         if (scene == "atrium") {
             RegisterBenchmark(id("LampSwitch").c_str(), BM_LampSwitch, scene)
+                ->UseManualTime()
+                ->Unit(benchmark::kMillisecond);
+            RegisterBenchmark(id("LampRedealt").c_str(), BM_LampRedealt, scene)
+                ->Iterations(1)
                 ->UseManualTime()
                 ->Unit(benchmark::kMillisecond);
             RegisterBenchmark(id("LightAdded").c_str(), BM_LightAdded, scene)

@@ -209,8 +209,9 @@ TEST(Detp, PointLightOverABlackPlaneThroughTheRealEmitterAndTracerFollowsTheClos
 // shining and shot within the budget, so the irradiance fades in. A 10 W/sr light shot with
 // 400k photons, then a 5 W/sr lamp at the same place, its 200k photons shot 100k a frame: at
 // each stage DETP at the foot follows the closed form for the power shot so far, within four
-// binomial standard errors of the photons shot (all carry the same power).
-TEST(Detp, ALampAddedInPlayFadesInToTheClosedForm) {
+// binomial standard errors of the photons shot (all carry the same power). Then the lamp is
+// dimmed far below its share, and dealt new photons.
+TEST(Detp, ALampAddedInPlayFadesInToTheClosedFormAndIsDealtNewPhotonsWhenDimmed) {
     constexpr float kIntensity = 10.f, kLampIntensity = 5.f; // W/sr
     constexpr std::uint32_t kPhotons = 400'000, kBudget = 100'000;
     const double h = 1.0, perPhoton = 4.0 * kPi * double(kIntensity) / double(kPhotons);
@@ -227,7 +228,7 @@ TEST(Detp, ALampAddedInPlayFadesInToTheClosedForm) {
     photons.update(registry, FrameContext{});
     registry.clearChanges();
 
-    test::addPointLight(registry, {0.f, float(h), 0.f}, kLampIntensity);
+    const Entity lamp = test::addPointLight(registry, {0.f, float(h), 0.f}, kLampIntensity);
     for (std::uint64_t frame = 0; frame <= 2; ++frame) {
         if (frame > 0) {
             photons.update(registry, FrameContext{frame, 0.0, 0.f, 0});
@@ -244,6 +245,28 @@ TEST(Detp, ALampAddedInPlayFadesInToTheClosedForm) {
         }
     }
     EXPECT_EQ(registry.ctx().get<PhotonStore>().pathCount(), 600'000u);
+
+    // The lamp dimmed twentyfold (0.25 W/sr): it holds 200k photons against a share of 14,634
+    // of the lit lights' 600k, more than 4x off, so it is dealt 14,634 new ones while its old
+    // ones go dark; the light keeps its 400k. Once the sweeps end, DETP follows the closed
+    // form of 10.25 W/sr, within four standard errors of the two lights' binomial counts.
+    registry.patch<PointLight>(lamp).intensity = kLampIntensity / 20.f;
+    std::uint64_t frame = 2;
+    do {
+        photons.update(registry, FrameContext{++frame, 0.0, 0.f, 0});
+        registry.clearChanges();
+        ASSERT_FALSE(registry.ctx().get<PhotonDelta>().full);
+    } while (photons.lastFrame().reshotPaths > 0 && frame < 100);
+    const PhotonStore& store = registry.ctx().get<PhotonStore>();
+    ASSERT_EQ(store.lights[1].photonCount, 14'634u);
+    const double lampPower = 4.0 * kPi * double(kLampIntensity) / 20.0;
+    for (const double r : {0.3, 0.1, 0.03}) {
+        const double light = perPhoton * kPhotons, sigmaLight = footSigma(light, h, r, kPhotons);
+        const double sigmaLamp = footSigma(lampPower, h, r, 14'634.0);
+        EXPECT_NEAR(detpAtFoot(registry, floor, r), footExpectation(light + lampPower, h, r),
+                    4.0 * std::hypot(sigmaLight, sigmaLamp))
+            << "r = " << r;
+    }
 }
 
 /// Parallel rays of total power 1 W over the unit square at y = 0, in a 10 x 10 quad floor; the

@@ -645,6 +645,19 @@ glm::dvec3 impactPower(const PhotonStore& store) {
 // mobiles' moves. Every frame the delta accounts for every watt the store gained or lost, and
 // every 10 frames DETP's incremental irradiance equals a fresh full estimate over the current
 // ray set, within the rounding of its sums.
+/// Each light's photons, summed at their first segments, carry its power (a dark light's, and a
+/// ghost's, hold no segments); within the float rounding of each photon's share.
+void expectEachLightsPowerShot(const PhotonStore& store) {
+    std::vector<glm::dvec3> sums(store.lights.size(), glm::dvec3(0.0));
+    for (std::size_t p = 0; p < store.pathCount(); ++p)
+        if (store.paths[p].count > 0)
+            sums[store.paths[p].light] += glm::dvec3(store.segments.power[store.paths[p].first]);
+    for (std::size_t l = 0; l < sums.size(); ++l)
+        for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(sums[l][c], store.lights[l].power[c], 1e-6 * store.lights[l].power[c])
+                << "light " << l << ", channel " << c;
+}
+
 TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
@@ -766,6 +779,7 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
     EXPECT_EQ(storeOf(registry).pathCount(), 30'000u);
     EXPECT_EQ(storeOf(registry).lights[0].photonCount, 20'000u);
     EXPECT_EQ(storeOf(registry).lights[2].photonCount, 757u); // the second lamp
+    expectEachLightsPowerShot(storeOf(registry));
 }
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
@@ -1530,6 +1544,7 @@ TEST(PhotonUpdate, ALightThatDriftsFarFromItsPhotonShareIsSharedAnew) {
         EXPECT_EQ(store.lights[1].photonCount, 4'000u);
         for (std::uint32_t p = 0; p < 8'040; ++p) // the budget covered every photon
             ASSERT_EQ(store.paths[p].count > 0, p >= 4'000) << "photon " << p;
+        expectEachLightsPowerShot(store);
     }
     // Dealt anew again (0.1 W/sr against the lamp's 0.2: a third of 4,040): the room light's
     // old 4,000 photons, dark now, hold the new ones.
@@ -1544,6 +1559,7 @@ TEST(PhotonUpdate, ALightThatDriftsFarFromItsPhotonShareIsSharedAnew) {
     for (std::uint32_t p = 0; p < 8'040; ++p)
         ASSERT_EQ(store.paths[p].count > 0, p < 1'347 || (p >= 4'000 && p < 8'000))
             << "photon " << p;
+    expectEachLightsPowerShot(store);
 }
 
 TEST(PhotonUpdate, AStandInAddedOrMovedAwayChangesWhatHybridModeCounts) {
