@@ -34,8 +34,9 @@ namespace qgi {
  *  refresh() re-indexes the chunks holding the most of them within a per-frame budget, and
  *  their paths become unchanged again. No frame ever rebuilds the whole grid.
  *
- *  Memory: 4 bytes per (path, cell) entry; 4 bytes per cell and chunk (chunks are sized so
- *  that this stays below 64 MiB); 32 bytes per changed path and 4 per path; one bit per path
+ *  Memory: 4 bytes per (path, cell) entry; 4 bytes per cell and chunk (chunks are sized at
+ *  build so that this stays below 64 MiB; paths added since add chunks of that size, up to
+ *  kMaxPhotonGrowth times as many); 32 bytes per changed path and 4 per path; one bit per path
  *  and, per thread, 4 bytes per cell of working marks and 4 per entry of the chunk it
  *  indexes. Queries are thread safe (they serialise on a mutex); build, markChanged and
  *  refresh are not.                                                                         */

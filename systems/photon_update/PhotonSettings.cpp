@@ -11,8 +11,8 @@ namespace {
 
 // Segment indices are 32-bit (PhotonPath::first). The store holds up to (1 + region room +
 // compactionFraction) times the live segments plus one frame of re-traced paths (under 2.5
-// times, PhotonStoreSpace), so the worst case (every photon reaching maxBounces) must fit four
-// times over.
+// times, PhotonStoreSpace), so the worst case (every photon reaching maxBounces, the store
+// grown to kMaxPhotonGrowth times photonCount) must fit four times over.
 constexpr std::uint64_t kMaxStoredSegments = std::uint64_t(1) << 30;
 constexpr std::uint32_t kMaxBounces = 255; // PhotonSegments::bounce is 8 bits
 constexpr std::uint32_t kMaxGridResolution = 128;
@@ -27,7 +27,7 @@ void checkFraction(float value, const char* field, float max) {
 } // namespace
 
 std::uint64_t maxPhotonCount(std::uint32_t maxBounces) {
-    return kMaxStoredSegments / (std::uint64_t(maxBounces) + 1);
+    return kMaxStoredSegments / (kMaxPhotonGrowth * (std::uint64_t(maxBounces) + 1));
 }
 
 void validatePhotonSettings(const PhotonSettings& s) {

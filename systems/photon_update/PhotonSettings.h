@@ -70,8 +70,11 @@ inline bool directionalBoundsSet(const PhotonSettings& settings) {
            settings.directionalBounds.max != Aabb{}.max;
 }
 
-/// The most photons a store may hold at `maxBounces` (32-bit segment indices with room for
-/// compaction: 2^30 / (maxBounces + 1)).
+/// In play the store may hold up to this many times photonCount photons: lights added, and
+/// shares dealt anew, take photons while the old ones go dark (PhotonUpdateSystem).
+inline constexpr std::uint32_t kMaxPhotonGrowth = 3;
+/// The most photons a store may be shot with at `maxBounces` (32-bit segment indices with room
+/// for compaction and growth: 2^30 / (kMaxPhotonGrowth (maxBounces + 1))).
 std::uint64_t maxPhotonCount(std::uint32_t maxBounces);
 /// Throws qgi::Error naming the field when a setting is out of its range.
 void validatePhotonSettings(const PhotonSettings& settings);

@@ -20,11 +20,13 @@ constexpr std::size_t kBudgetDivisor = 32;
 } // namespace
 
 void PhotonStoreSpace::clear() {
+    mLaidOut = false;
     mRegions.clear();
     mOverflowStart = mReleased = 0;
 }
 
 void PhotonStoreSpace::layOut(PhotonStore& store, double overflow) {
+    mLaidOut = true;
     const std::size_t paths = store.paths.size();
     mRegionPaths = std::clamp((paths + 63) / 64, kMinRegionPaths, kMaxRegionPaths);
     const std::size_t regions = (paths + mRegionPaths - 1) / mRegionPaths;

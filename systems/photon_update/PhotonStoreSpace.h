@@ -51,7 +51,7 @@ public:
     /// Forgets the layout: the store is used as traced, and `place` must not be called until
     /// the next layOut (a store re-shot every frame never needs one).
     void clear();
-    bool laidOut() const { return !mRegions.empty(); }
+    bool laidOut() const { return mLaidOut; }
 
     /// Where path `path`'s new `count` segments go: its old range when they fit, else its
     /// region's free room, else `end` (the store's end, advanced). Books the garbage left.
@@ -81,6 +81,7 @@ private:
     std::size_t compactRegion(PhotonStore& store, std::size_t r, PhotonSegments& scratch);
     void release(Region& region, const PhotonPath& path, std::size_t segments);
 
+    bool mLaidOut = false; ///< also for a store of no paths (all lights dark at the shot)
     std::size_t mRegionPaths = kMaxRegionPaths;
     std::vector<Region> mRegions;
     std::size_t mOverflowStart = 0;  ///< the overflow is [mOverflowStart, store size)

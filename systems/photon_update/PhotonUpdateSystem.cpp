@@ -49,10 +49,10 @@ constexpr std::size_t kRebuildRecurringMultiple = 8;
 // (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
 constexpr double kShareDrift = 4.0;
 // Photons for lights added in play, and for shares dealt anew, come from ranges no light needs
-// any more, else from the store's end, up to this many times PhotonSettings::photonCount in
-// all: room for a share dealt anew (photonCount more) on top of lights added. A path that
-// holds nothing costs 8 bytes, and a few bits in the path grid.
-constexpr std::size_t kMaxStoreGrowth = 3;
+// any more, else from the store's end, up to kMaxPhotonGrowth times PhotonSettings::photonCount
+// in all: room for shares dealt anew on top of lights added. A path that holds nothing costs
+// 8 bytes, and a few bits in the path grid.
+constexpr std::size_t kMaxStoreGrowth = kMaxPhotonGrowth;
 // reuseLandedPaths: a segment tested again lands where it did within this fraction of the
 // scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
 // it).

@@ -13,6 +13,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Finite.h"
+#include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
@@ -71,6 +72,24 @@ glm::vec3 forwardOf(const glm::mat4& m) {
     return length > 0.f ? f / length : glm::vec3(0.f, 0.f, -1.f);
 }
 
+/// The punctual lights the probes see (those with a pose), each with its stand-in flag, in
+/// registry order: a hash that changes when one is removed, added or (un)tagged.
+std::uint64_t lightSetSignature(const Registry& registry) {
+    Fnv1aHasher h;
+    const auto add = [&](Entity e, std::uint8_t kind) {
+        h.add(kind);
+        h.add(e);
+        h.add(registry.has<LightStandIn>(e));
+    };
+    registry.view<const PointLight, const WorldTransform>().each(
+        [&](Entity e, const PointLight&, const WorldTransform&) { add(e, 0); });
+    registry.view<const SpotLight, const WorldTransform>().each(
+        [&](Entity e, const SpotLight&, const WorldTransform&) { add(e, 1); });
+    registry.view<const DirectionalLight, const WorldTransform>().each(
+        [&](Entity e, const DirectionalLight&, const WorldTransform&) { add(e, 2); });
+    return h.value();
+}
+
 } // namespace
 
 ShProbeSystem::ShProbeSystem(const ShProbeSettings& settings) : mSettings(settings) {
@@ -103,8 +122,7 @@ void ShProbeSystem::build(Registry& registry) {
     mEnvironment = isFinite(info->environment) ? info->environment : glm::vec3(0.f);
     mStale.assign(mVolume->probeCount(), 0);
     mStaleCount = 0;
-    mLightCounts = {registry.count<PointLight>(), registry.count<SpotLight>(),
-                    registry.count<DirectionalLight>()};
+    mLightSet = lightSetSignature(registry);
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
     mFineTouched.clear(); // end points counted from the next delta on
     mFramesSinceHalving = 0;
@@ -439,10 +457,9 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         if (registry.has<PointLight>(e) || registry.has<SpotLight>(e) ||
             registry.has<DirectionalLight>(e))
             all = true;
-    const std::array<std::size_t, 3> lights{registry.count<PointLight>(),
-                                            registry.count<SpotLight>(),
-                                            registry.count<DirectionalLight>()};
-    if (std::exchange(mLightCounts, lights) != lights) all = true; // one removed
+    if (const std::uint64_t lights = lightSetSignature(registry);
+        std::exchange(mLightSet, lights) != lights)
+        all = true; // one removed, or (un)tagged a stand-in
 
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
     if (delta && delta->full) all = true;

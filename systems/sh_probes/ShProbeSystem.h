@@ -11,7 +11,6 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
-#include <array>
 #include <cstdint>
 #include <span>
 #include <unordered_map>
@@ -178,9 +177,10 @@ private:
     // Snapshot of the scene the projection reads (rebuilt before each projection batch).
     std::vector<Surface> mSurfaces; ///< by Entity::index
     std::vector<Light> mLights;
-    /// Point, spot and directional lights in the registry at the last frame: one removed
-    /// (entity destroyed, component taken off) is no entry of the change lists.
-    std::array<std::size_t, 3> mLightCounts{};
+    /// Which punctual lights there were at the last frame, and which were stand-ins
+    /// (lightSetSignature): a light removed (entity destroyed, component or pose taken off) or
+    /// tagged is no entry of the change lists.
+    std::uint64_t mLightSet = 0;
 
     // Frame scratch.
     std::vector<std::uint32_t> mRefresh;

@@ -104,15 +104,15 @@ double footSigma(double power, double h, double r, double photons) {
     return expected * std::sqrt((1.0 - p) / (photons * p));
 }
 
-/// DETP's estimate (red channel) at vertex 4 of `floor`, with discs of radius r, over the
-/// registry's photons.
-double detpAtFoot(Registry& registry, Entity floor, double r) {
+/// DETP's estimate (red channel) at vertex `vertex` (by default 4, the middle) of `floor`, with
+/// discs of radius r, over the registry's photons.
+double detpAtFoot(Registry& registry, Entity floor, double r, std::size_t vertex = 4) {
     DetpSettings settings;
     settings.discRadius = float(r);
     DetpIrradianceSystem system(settings);
     system.build(registry);
     system.update(registry, {});
-    return irradiance(registry, floor).irradiance[4].x;
+    return irradiance(registry, floor).irradiance[vertex].x;
 }
 
 // ---- analytic cases -----------------------------------------------------------------------
@@ -206,19 +206,23 @@ TEST(Detp, PointLightOverABlackPlaneThroughTheRealEmitterAndTracerFollowsTheClos
 }
 
 // A lamp added in play: its photons are appended at the power per photon of the light already
-// shining and shot within the budget, so the irradiance fades in. A 10 W/sr light shot with
-// 400k photons, then a 5 W/sr lamp at the same place, its 200k photons shot 100k a frame: at
-// each stage DETP at the foot follows the closed form for the power shot so far, within four
-// binomial standard errors of the photons shot (all carry the same power). Then the lamp is
-// dimmed far below its share, and dealt new photons.
+// shining and shot within the budget, so its irradiance fades in. A 10 W/sr light over the
+// middle of a black floor, shot with 400k photons; then a 5 W/sr lamp 10 m to its side, its
+// 200k photons shot 100k a frame. At each stage DETP at each light's foot follows the closed
+// form for the power shot so far, plus the other light's far irradiance I cos / R^2, within
+// four binomial standard errors of each light's photons. Then the lamp is dimmed far below
+// its share and dealt new photons: the same at its foot once the sweeps end.
 TEST(Detp, ALampAddedInPlayFadesInToTheClosedFormAndIsDealtNewPhotonsWhenDimmed) {
     constexpr float kIntensity = 10.f, kLampIntensity = 5.f; // W/sr
     constexpr std::uint32_t kPhotons = 400'000, kBudget = 100'000;
-    const double h = 1.0, perPhoton = 4.0 * kPi * double(kIntensity) / double(kPhotons);
+    const double h = 1.0, side = 10.0;
+    const double perPhoton = 4.0 * kPi * double(kIntensity) / double(kPhotons);
     Registry registry;
+    // 2 x 2 quads over 20 m: vertex 4 at the middle, vertex 5 at (10, 0, 0).
     const Entity floor = test::addMesh(
         registry, gridMesh({-10.f, 0.f, -10.f}, {0.f, 0.f, 20.f}, {20.f, 0.f, 0.f}, 2), kIdentity,
         test::grey(0.f), false, "floor");
+    ASSERT_EQ(registry.get<Mesh>(floor).positions[5], glm::vec3(float(side), 0.f, 0.f));
     test::addPointLight(registry, {0.f, float(h), 0.f}, kIntensity);
     test::buildRayScene(registry);
     PhotonSettings photonSettings;
@@ -228,7 +232,29 @@ TEST(Detp, ALampAddedInPlayFadesInToTheClosedFormAndIsDealtNewPhotonsWhenDimmed)
     photons.update(registry, FrameContext{});
     registry.clearChanges();
 
-    const Entity lamp = test::addPointLight(registry, {0.f, float(h), 0.f}, kLampIntensity);
+    // Expected irradiance and standard error at the foot of one light (power, photons) with
+    // the other's (power, photons) at distance `side`.
+    const double farCos = h / std::hypot(h, side), farR2 = h * h + side * side;
+    const auto expectAtFoot = [&](std::size_t vertex, double power, double photonsShot,
+                                  double otherPower, double otherPhotons, const char* what) {
+        for (const double r : {0.3, 0.1, 0.03}) {
+            const double near = footExpectation(power, h, r);
+            const double far = otherPower / (4.0 * kPi) * farCos / farR2;
+            // Binomial: photons that cross the disc, each carrying power / photons.
+            const auto sigma = [&](double e, double p, double n) {
+                if (n == 0.0) return 0.0;
+                const double q = e * kPi * r * r / p;
+                return e * std::sqrt((1.0 - q) / (n * q));
+            };
+            const double error =
+                std::hypot(sigma(near, power, photonsShot), sigma(far, otherPower, otherPhotons));
+            EXPECT_NEAR(detpAtFoot(registry, floor, r, vertex), near + far, 4.0 * error)
+                << what << ", r = " << r;
+        }
+    };
+
+    const Entity lamp = test::addPointLight(registry, {float(side), float(h), 0.f}, kLampIntensity);
+    const double light = perPhoton * kPhotons;
     for (std::uint64_t frame = 0; frame <= 2; ++frame) {
         if (frame > 0) {
             photons.update(registry, FrameContext{frame, 0.0, 0.f, 0});
@@ -236,20 +262,16 @@ TEST(Detp, ALampAddedInPlayFadesInToTheClosedFormAndIsDealtNewPhotonsWhenDimmed)
             ASSERT_FALSE(registry.ctx().get<PhotonDelta>().full);
             ASSERT_EQ(photons.lastFrame().reshotPaths, kBudget);
         }
-        const double shot = double(kPhotons + frame * kBudget);
-        for (const double r : {0.3, 0.1, 0.03}) {
-            const double power = perPhoton * shot;
-            EXPECT_NEAR(detpAtFoot(registry, floor, r), footExpectation(power, h, r),
-                        4.0 * footSigma(power, h, r, shot))
-                << "frame " << frame << ", r = " << r;
-        }
+        const double lampShot = double(frame * kBudget); // at the light's power per photon
+        const std::string when = "frame " + std::to_string(frame);
+        expectAtFoot(4, light, kPhotons, perPhoton * lampShot, lampShot, when.c_str());
+        expectAtFoot(5, perPhoton * lampShot, lampShot, light, kPhotons, when.c_str());
     }
     EXPECT_EQ(registry.ctx().get<PhotonStore>().pathCount(), 600'000u);
 
-    // The lamp dimmed twentyfold (0.25 W/sr): it holds 200k photons against a share of 14,634
-    // of the lit lights' 600k, more than 4x off, so it is dealt 14,634 new ones while its old
-    // ones go dark; the light keeps its 400k. Once the sweeps end, DETP follows the closed
-    // form of 10.25 W/sr, within four standard errors of the two lights' binomial counts.
+    // Dimmed twentyfold (0.25 W/sr), the lamp holds 200k photons against a share of 14,634 of
+    // the lit lights' 600k, more than 4x off: it is dealt 14,634 new ones while its old ones
+    // go dark; the light keeps its 400k.
     registry.patch<PointLight>(lamp).intensity = kLampIntensity / 20.f;
     std::uint64_t frame = 2;
     do {
@@ -257,16 +279,10 @@ TEST(Detp, ALampAddedInPlayFadesInToTheClosedFormAndIsDealtNewPhotonsWhenDimmed)
         registry.clearChanges();
         ASSERT_FALSE(registry.ctx().get<PhotonDelta>().full);
     } while (photons.lastFrame().reshotPaths > 0 && frame < 100);
-    const PhotonStore& store = registry.ctx().get<PhotonStore>();
-    ASSERT_EQ(store.lights[1].photonCount, 14'634u);
-    const double lampPower = 4.0 * kPi * double(kLampIntensity) / 20.0;
-    for (const double r : {0.3, 0.1, 0.03}) {
-        const double light = perPhoton * kPhotons, sigmaLight = footSigma(light, h, r, kPhotons);
-        const double sigmaLamp = footSigma(lampPower, h, r, 14'634.0);
-        EXPECT_NEAR(detpAtFoot(registry, floor, r), footExpectation(light + lampPower, h, r),
-                    4.0 * std::hypot(sigmaLight, sigmaLamp))
-            << "r = " << r;
-    }
+    ASSERT_EQ(registry.ctx().get<PhotonStore>().lights[1].photonCount, 14'634u);
+    const double dimmed = 4.0 * kPi * double(kLampIntensity) / 20.0;
+    expectAtFoot(5, dimmed, 14'634.0, light, kPhotons, "dimmed");
+    expectAtFoot(4, light, kPhotons, dimmed, 14'634.0, "dimmed");
 }
 
 /// Parallel rays of total power 1 W over the unit square at y = 0, in a 10 x 10 quad floor; the

@@ -1486,6 +1486,38 @@ TEST(PhotonUpdate, ARemovedLightsPhotonsGoDarkAndAreHandedOnAndTheStoreGrowsAtMo
     EXPECT_EQ(total, 4'000u);
 }
 
+TEST(PhotonUpdate, ALightAddedOrLitWhenTheStoreIsEmptyGetsPhotonCountPhotons) {
+    // Shot with every light dark (or none at all), the store holds no photon; a light lit or
+    // created later gets photonCount photons of its own, shot within the budget.
+    for (const bool created : {false, true}) {
+        SCOPED_TRACE(created ? "created" : "lit");
+        Registry registry;
+        const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+        if (created)
+            registry.destroy(room.light);
+        else
+            registry.get<PointLight>(room.light).intensity = 0.f;
+        buildRayScene(registry);
+        PhotonSettings settings = settingsWith(4'000);
+        settings.reshootBudget = 1'500;
+        PhotonUpdateSystem system(settings);
+        firstUpdate(registry, system);
+        ASSERT_EQ(storeOf(registry).segments.size(), 0u);
+        if (created)
+            test::addPointLight(registry, {0.f, 1.2f, 0.f}, 10.f);
+        else
+            registry.patch<PointLight>(room.light).intensity = 10.f;
+        std::uint64_t frame = 0;
+        EXPECT_EQ(reshotPerFrame(registry, system, frame, 4),
+                  (std::vector<std::size_t>{1'500, 1'500, 1'000, 0}));
+        const PhotonStore& store = storeOf(registry);
+        ASSERT_EQ(store.pathCount(), 4'000u);
+        for (std::uint32_t p = 0; p < 4'000; ++p)
+            ASSERT_GT(store.paths[p].count, 0u) << "photon " << p;
+        expectEachLightsPowerShot(store);
+    }
+}
+
 TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
     // The only light with photons switched off, and one shot without photons switched on: it
     // gets photonCount photons of its own, appended, while the dark one's wait.

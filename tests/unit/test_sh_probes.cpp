@@ -1147,12 +1147,15 @@ TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
         SunAdded,
         LightDestroyed,
         LightComponentRemoved,
+        LightPoseRemoved,
+        StandInTagged,
         Albedo
     };
     for (const Trigger trigger :
          {Trigger::None, Trigger::FullDelta, Trigger::LightIntensity, Trigger::LightMoved,
           Trigger::SpotAdded, Trigger::SunAdded, Trigger::LightDestroyed,
-          Trigger::LightComponentRemoved, Trigger::Albedo}) {
+          Trigger::LightComponentRemoved, Trigger::LightPoseRemoved, Trigger::StandInTagged,
+          Trigger::Albedo}) {
         SCOPED_TRACE(int(trigger));
         MobileRoom room(0);
         Registry& w = room.world;
@@ -1180,6 +1183,12 @@ TEST(ShProbes, FullDeltaOrChangedLightMarksEverything) {
             break;
         case Trigger::LightComponentRemoved:
             w.remove<PointLight>(light);
+            break;
+        case Trigger::LightPoseRemoved:
+            w.remove<WorldTransform>(light);
+            break;
+        case Trigger::StandInTagged: // the shader draws it: the probes no longer see it
+            w.emplace<LightStandIn>(light);
             break;
         case Trigger::Albedo:
             w.patch<Material>(room.cube).baseColor = glm::vec3(0.9f);
