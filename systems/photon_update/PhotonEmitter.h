@@ -52,8 +52,9 @@ struct PhotonEmitter {
     float innerAngle = 0.f; ///< spot, radians, half angle
     float outerAngle = 0.f; ///< spot, radians, half angle
     /// Kept by the photon update for a light that is no longer among the sources (its entity,
-    /// light component or emission gone, or an emissive mobile out of the world): dark, its
-    /// photons waiting with their indices until it is listed again or a full shot drops it.
+    /// light component, pose or emission gone, or an emissive mobile out of the world): dark,
+    /// its photons re-shot empty, then free for other lights; listed again, it shines from
+    /// those it still has. A full shot drops it.
     bool absent = false;
     /// Also absent: a stand-in the photon update made to hold a light's former photons when
     /// the light was given new ones (its share dealt anew); it re-shoots them empty. No source

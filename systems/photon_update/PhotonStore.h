@@ -64,11 +64,11 @@ struct PhotonLight {
 
 /** World resource: the stored photon ray set (seed 000 section 2.2).
  *  Photon i's path is `paths[i]`; its segments are contiguous in `segments` (none for a photon
- *  of a light switched off or removed). Lights added in play append their photons: paths
- *  (and lights) only grow between full shots. A re-traced path is rewritten in place when it fits
- * its old range, otherwise moved; what it leaves behind is garbage, reclaimed a few regions a frame
- *  (PhotonStoreSpace). Segments between paths hold nothing, and segment indices are not
- *  stable across frames: walk paths, and refer to segments as (path, k).
+ *  of a light switched off or removed). Lights given photons in play take those other lights no
+ * longer need, or append them: paths (and lights) only grow between full shots. A re-traced path is
+ * rewritten in place when it fits its old range, otherwise moved; what it leaves behind is garbage,
+ * reclaimed a few regions a frame (PhotonStoreSpace). Segments between paths hold nothing, and
+ * segment indices are not stable across frames: walk paths, and refer to segments as (path, k).
  *  Written by PhotonUpdateSystem only; everything else reads it.                         */
 struct PhotonStore {
     PhotonSegments segments;

@@ -45,9 +45,11 @@ constexpr std::size_t kIdleRetracedMultiple = 2;
 // albedo edit alone): cornell's moving block keeps about 1/8 changed with 55k re-traced a frame.
 constexpr std::size_t kRebuildChangedRatio = 16;
 constexpr std::size_t kRebuildRecurringMultiple = 8;
-// How far a light's power per photon may drift from the mean before photons are shared anew
-// (a full shot): each reshoot is a hitch, so only a drift that costs visibly in noise.
+// How far a light's photon count may drift from its share before it is dealt new photons
+// (redealDrifted): each deal re-shoots its photons, so only a drift that costs visibly in
+// noise. Once a deal is due, lights this far off are dealt anew along with it.
 constexpr double kShareDrift = 4.0;
+constexpr double kRedealAlong = 2.0;
 // Photons for lights added in play, and for shares dealt anew, come from ranges no light needs
 // any more, else from the store's end, up to kMaxPhotonGrowth times PhotonSettings::photonCount
 // in all: room for shares dealt anew on top of lights added. A path that holds nothing costs
@@ -508,10 +510,12 @@ bool PhotonUpdateSystem::addPhotons(PhotonStore& store) {
         }
     }
     if (!(waiting > 0.0)) return true;
-    // Photons per watt: the lit lights', so every photon carries the same power; with none
-    // lit, the configured count spread over the new ones. A light short of room takes what
-    // there is, down to a quarter of its share (the drift sharesDrifted tolerates).
-    const double rate = litPhotons > 0.0 ? litPhotons / litPower : mSettings.photonCount / waiting;
+    // Photons per watt: the lit lights', so every photon carries the same power, but never
+    // fewer than photonCount over all the lights that shine (when the lights with photons
+    // have few, a big one removed, the new ones restore the count). A light short of room
+    // takes what there is, down to a quarter of its share (the drift redealDrifted tolerates).
+    const double rate = std::max(litPhotons > 0.0 ? litPhotons / litPower : 0.0,
+                                 mSettings.photonCount / (litPower + waiting));
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
         const PhotonEmitter& e = mEmitters[l];
         if (!carriesPower(e.power) || e.photonCount > 0) continue;
@@ -529,33 +533,42 @@ bool PhotonUpdateSystem::addPhotons(PhotonStore& store) {
 bool PhotonUpdateSystem::redealDrifted(PhotonStore& store) {
     // Photons carry equal power only as dealt: a light that has since brightened carries more
     // per photon than the rest (noisier, not biased), one dimmed holds photons the others
-    // could use. Each light's count is compared with its exact share of the lit lights'
-    // photons; a share under one photon is no share to keep. Lights switched off are left
-    // out: their photons wait for them, and the lights still on keep their shares of each
-    // other.
+    // could use. Each lit light's count is compared with its exact share of the lit lights'
+    // photons, or of photonCount when they hold fewer (a big light removed or switched off
+    // leaves the rest too few); a share under one photon is no share to keep. Lights
+    // switched off are left out: their photons wait for them.
     double total = 0.0, photons = 0.0;
     for (const PhotonEmitter& e : mEmitters) {
         if (!carriesPower(e.power)) continue;
         total += wattsOf(e.power);
         photons += e.photonCount;
     }
-    if (!(total > 0.0) || !(photons > 0.0)) return true;
+    if (!(total > 0.0)) return true;
+    photons = std::max(photons, double(mSettings.photonCount));
+    const auto shareOf = [&](const PhotonEmitter& e) { return photons * wattsOf(e.power) / total; };
+    const auto off = [&](const PhotonEmitter& e, double factor) {
+        const double share = shareOf(e), count = e.photonCount;
+        return share >= 1.0 && (count * factor < share || count > factor * share);
+    };
+    const bool any = std::any_of(mEmitters.begin(), mEmitters.end(), [&](const PhotonEmitter& e) {
+        return carriesPower(e.power) && off(e, kShareDrift);
+    });
+    if (!any) return true;
+    // Once a deal is due, lights 2x off their shares are dealt anew with it: then every lit
+    // light is within 2x of its share, and the lit photons within 2x of their total.
     mDrifted.clear();
-    for (std::size_t l = 0; l < mEmitters.size(); ++l) {
-        const PhotonEmitter& e = mEmitters[l];
-        if (!carriesPower(e.power)) continue;
-        const double share = photons * wattsOf(e.power) / total;
-        const double count = e.photonCount;
-        if (share >= 1.0 && (count * kShareDrift < share || count > kShareDrift * share))
-            mDrifted.emplace_back(l, std::uint32_t(std::floor(share + 0.5)));
-    }
-    // Each drifted light's photons go dark (a ghost re-shoots them empty) while its share is
-    // shot from a range of its own: its light fades from the old photons to the new.
+    for (std::size_t l = 0; l < mEmitters.size(); ++l)
+        if (carriesPower(mEmitters[l].power) && off(mEmitters[l], kRedealAlong))
+            mDrifted.emplace_back(l, std::uint32_t(std::floor(shareOf(mEmitters[l]) + 0.5)));
+    // Each light's photons go dark (a ghost re-shoots them empty) while its share is shot
+    // from a range of its own: its light fades from the old photons to the new. Short of
+    // room, it takes what there is, down to a quarter of its share.
     for (const auto& [l, share] : mDrifted)
         if (!retire(store, l)) return false;
     for (const auto& [l, share] : mDrifted) {
-        if (roomFor(store, share) < share) return false;
-        takeRange(store, l, share);
+        const std::uint32_t count = roomFor(store, share);
+        if (double(count) * kShareDrift < double(share)) return false;
+        if (count > 0) takeRange(store, l, count);
     }
     mStats.redealtLights = mDrifted.size();
     return true;

@@ -65,26 +65,29 @@ class PhotonPathGrid;
  *     until each has been re-shot once since its last change; the delta reports each one with
  *     its whole old and new path. Until then the light's photons mix old and new shots (a
  *     light that moves every frame shows a smear over its last photons / reshootBudget
- *     frames). A light switched off (a punctual light's intensity or a surface's emission
- *     set to 0, an emissive mobile taken out of the world) is such a change: its photons
+ *     frames). A punctual light switched off (intensity 0) is such a change: its photons
  *     carry nothing, so they are re-shot empty (no segments) and wait, with their indices,
- *     for it to shine again; the lights still on keep their photons. So is a light removed
- *     (its entity or light component gone, an emissive surface's emission set to 0): it is
- *     kept, absent and dark, until it is listed again or a full shot drops it.
+ *     for it to shine again; the lights still on keep their photons. So is a light no longer
+ *     among the sources (its entity, light component or pose gone, a surface's emission set
+ *     to 0, an emissive mobile taken out of the world): it is kept, *absent* and dark; once
+ *     its photons are all empty they are free for other lights, and listed again it shines
+ *     from those it still has, or gets new ones.
  *   - Lights added (or lighting up without photons of their own): each gets photons at the
- *     power per photon of the lights that have some (with none lit, photonCount over the new
- *     lights), shot within the same budget, so the light fades in over photons /
- *     reshootBudget frames.
- *   - Lights whose power drifted until their photon count is 4x above or below their share
- *     of the lit lights' photons (a share of one photon or more): each is dealt its share
- *     anew. Its old photons go to a *ghost* (an emitter no source matches, dark), which
- *     re-shoots them empty within the budget while the new ones are shot: its light fades
- *     from the old photons to the new. The other lights keep theirs.
- *   Photons a light takes come from *free* ranges first (those of removed lights and ghosts
- *   once all re-shot empty; neighbours merged), else are appended to the store, which grows
- *   to at most three times photonCount. A light that would get under a quarter of its share
- *   for want of room has every photon shot anew (a full shot, which also drops removed lights
- *   and ghosts).
+ *     power per photon of the lights that have some, but with them never fewer than
+ *     photonCount lit photons in all, shot within the same budget, so the light fades in
+ *     over photons / reshootBudget frames.
+ *   - Lights whose photon count drifted 4x above or below their share (of the lit lights'
+ *     photons, or of photonCount when they hold fewer; a share of one photon or more): each
+ *     is dealt its share anew, and with them every light 2x off. Its old photons go to a
+ *     *ghost* (an emitter no source matches, dark, its hybrid flag kept), which re-shoots
+ *     them empty within the budget while the new ones are shot: its light fades from the
+ *     old photons to the new. The other lights keep theirs, within 2x of their shares then.
+ *   Photons a light takes come from *free* ranges first (those of absent lights and ghosts
+ *   once all re-shot empty; neighbours merged; the smallest that holds them), else are
+ *   appended to the store, which grows to at most kMaxPhotonGrowth (3) times photonCount. A
+ *   light that would get under a quarter of its share for want of room, or a ghost for want
+ *   of an emitter slot (kMaxLights), has every photon shot anew (a full shot, which also
+ *   drops absent lights and ghosts).
  *  Each update stamps the delta with the next PhotonDelta::sequence. The scene's bounds and its
  *  set of mobiles are captured at the first shot: a scene whose meshes are added or removed
  *  needs a new RayScene and a new system. So is the box directional lights cover
@@ -189,18 +192,18 @@ private:
 
     /// Compares this frame's light sources with those shot (matched by kind and entity);
     /// prepares changed and added lights, marks removed ones absent, starts their sweeps and
-    /// gives photons to lights without (addPhotons). True when a full shot is due: a stand-in
-    /// changed what hybrid mode counts, the new lights found no room, or the lights' powers
-    /// drifted from their photon shares (sharesDrifted).
+    /// gives photons to lights without (addPhotons) and new ones to lights far off their
+    /// shares (redealDrifted). True when a full shot is due: a stand-in changed what hybrid
+    /// mode counts, or lights found no room.
     bool detectLightChanges(const Registry& registry, PhotonStore& store, PhotonPathGrid& grid);
     /// Gives photons to every shining light that has none, at the lit lights' power per
     /// photon (takeRange); false when one would get under 1/kShareDrift of its share for want
     /// of room (a full shot is due).
     bool addPhotons(PhotonStore& store);
-    /// Each shining light whose photon count is more than kShareDrift times above or below its
-    /// exact share of the lit lights' photons (a share of one photon or more) hands its
-    /// photons to a ghost (retire) and takes a range of its share. False when there is no
-    /// room (a full shot is due).
+    /// When a shining light's photon count is more than kShareDrift times above or below its
+    /// exact share (of the lit lights' photons, at least photonCount; a share of one photon or
+    /// more), it and every light kRedealAlong times off hand their photons to ghosts (retire)
+    /// and take ranges of their shares. False when there is no room (a full shot is due).
     bool redealDrifted(PhotonStore& store);
     /// Photon ranges. A *free* range belongs to an absent light (removed, or a ghost) whose
     /// photons are all re-shot empty: its paths hold nothing and it can be handed on.

@@ -658,7 +658,11 @@ void expectEachLightsPowerShot(const PhotonStore& store) {
                 << "light " << l << ", channel " << c;
 }
 
-TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
+/// Parameter: DETP in hybrid mode (the lights' first segments left to the shader: a ghost must
+/// keep its light's flag) or photon mode.
+class HundredMoves : public ::testing::TestWithParam<bool> {};
+
+TEST_P(HundredMoves, AndLampsKeepTheStoresPowerAccountedAndDetpEqualToAFullEstimate) {
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
     // Vertices all over, 10 cm apart on the mobiles and 25 cm on the room: discs to cross.
@@ -677,6 +681,7 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
     photons.update(registry, FrameContext{});
     DetpSettings settings;
     settings.discRadius = 0.05f;
+    settings.hybrid = GetParam();
     DetpIrradianceSystem detp(settings);
     detp.build(registry);
     detp.update(registry, FrameContext{});
@@ -781,6 +786,9 @@ TEST(PhotonUpdate, AHundredMovesAndLampsKeepTheStoresPowerAccountedAndDetpEqualT
     EXPECT_EQ(storeOf(registry).lights[2].photonCount, 757u); // the second lamp
     expectEachLightsPowerShot(storeOf(registry));
 }
+
+INSTANTIATE_TEST_SUITE_P(PhotonUpdate, HundredMoves, ::testing::Bool(),
+                         [](const auto& test) { return test.param ? "Hybrid" : "PhotonMode"; });
 
 TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
     // The crate waits out of the world 50 m away; the sun's photons still spread over the room
@@ -1516,6 +1524,106 @@ TEST(PhotonUpdate, ALightAddedOrLitWhenTheStoreIsEmptyGetsPhotonCountPhotons) {
             ASSERT_GT(store.paths[p].count, 0u) << "photon " << p;
         expectEachLightsPowerShot(store);
     }
+}
+
+/// The index of the light shot from `e` in the store's list.
+std::size_t lightOf(const PhotonStore& store, Entity e) {
+    for (std::size_t l = 0; l < store.lights.size(); ++l)
+        if (store.lights[l].entity == e) return l;
+    ADD_FAILURE() << "no light of entity " << e.index;
+    return 0;
+}
+
+/// Light l's photons: [first, end) of the store's paths, checked contiguous.
+std::pair<std::uint32_t, std::uint32_t> rangeOf(const PhotonStore& store, std::size_t l) {
+    std::uint32_t first = 0, end = 0;
+    bool found = false;
+    for (std::uint32_t p = 0; p < store.pathCount(); ++p) {
+        if (store.paths[p].light != l) continue;
+        if (!found) first = p;
+        EXPECT_TRUE(!found || p == end) << "light " << l << " holds a second range at " << p;
+        found = true;
+        end = p + 1;
+    }
+    return {first, end};
+}
+
+TEST(PhotonUpdate, PhotonsOfRemovedLightsAreHandedOnOnlyOnceDarkAndNeighboursMerged) {
+    // Four 10 W/sr lights, 1,000 photons each in photon order; the second and third destroyed.
+    // A light added while their photons are still being re-shot empty may not take them: it
+    // is appended, with 1,333 photons (photonCount over the 30 W/sr that shine: the lit
+    // lights' 2,000 are too few). Once dark, their two ranges are one, and a 15 W/sr light
+    // wanting 1,666 (at the lit lights' 3,333 per 30 W/sr) takes its start.
+    PhotonSettings settings = settingsWith(4'000);
+    settings.reshootBudget = 500;
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    std::array<Entity, 3> lamps;
+    for (std::size_t i = 0; i < lamps.size(); ++i)
+        lamps[i] = test::addPointLight(registry, {-1.f + float(i), 0.5f, 1.f}, 10.f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+    ASSERT_EQ(rangeOf(storeOf(registry), 1),
+              (std::pair<std::uint32_t, std::uint32_t>{1'000, 2'000}));
+    ASSERT_EQ(rangeOf(storeOf(registry), 2),
+              (std::pair<std::uint32_t, std::uint32_t>{2'000, 3'000}));
+
+    registry.destroy(lamps[0]);
+    registry.destroy(lamps[1]);
+    std::uint64_t frame = 0;
+    reshotPerFrame(registry, system, frame, 1); // 500 of their 2,000 photons
+    const Entity early = test::addPointLight(registry, {0.f, 0.5f, -1.f}, 10.f);
+    reshotPerFrame(registry, system, frame, 8); // the rest, and the new light's 1,000
+    EXPECT_EQ(rangeOf(storeOf(registry), lightOf(storeOf(registry), early)),
+              (std::pair<std::uint32_t, std::uint32_t>{4'000, 5'333}));
+    EXPECT_EQ(system.lastFrame().reshotPaths, 0u);
+
+    const Entity late = test::addPointLight(registry, {0.5f, 0.5f, -1.f}, 15.f);
+    reshotPerFrame(registry, system, frame, 1);
+    EXPECT_EQ(system.lastFrame().addedPaths, 0u);
+    EXPECT_EQ(reshotPerFrame(registry, system, frame, 4),
+              (std::vector<std::size_t>{500, 500, 166, 0}));
+    const PhotonStore& store = storeOf(registry);
+    EXPECT_EQ(store.pathCount(), 5'333u);
+    EXPECT_EQ(rangeOf(store, lightOf(store, late)),
+              (std::pair<std::uint32_t, std::uint32_t>{1'000, 2'666}));
+    EXPECT_EQ(store.lights[lightOf(store, room.light)].photonCount, 1'000u);
+    expectEachLightsPowerShot(store);
+}
+
+TEST(PhotonUpdate, TheLitPhotonsStayNearPhotonCountWhenLightsChangeOrGo) {
+    // Three 10 W/sr lights, 1,000 photons each. The room light a hundred times brighter: the
+    // lamps hold 34x their shares of 3,000 and are dealt 29 each; the room light, 2.9x under
+    // its 2,941, is dealt anew with them. Then it is destroyed: the lamps, 29 of a share of
+    // photonCount each, are dealt 1,500 each.
+    PhotonSettings settings = settingsWith(3'000);
+    settings.reshootBudget = 100'000;
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const Entity a = test::addPointLight(registry, {-1.f, 0.5f, 1.f}, 10.f);
+    const Entity b = test::addPointLight(registry, {1.f, 0.5f, 1.f}, 10.f);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+
+    registry.patch<PointLight>(room.light).intensity = 1'000.f;
+    std::uint64_t frame = 0;
+    reshotPerFrame(registry, system, frame, 2);
+    {
+        const PhotonStore& store = storeOf(registry);
+        EXPECT_EQ(store.lights[lightOf(store, room.light)].photonCount, 2'941u);
+        EXPECT_EQ(store.lights[lightOf(store, a)].photonCount, 29u);
+        EXPECT_EQ(store.lights[lightOf(store, b)].photonCount, 29u);
+        expectEachLightsPowerShot(store);
+    }
+    registry.destroy(room.light);
+    reshotPerFrame(registry, system, frame, 2);
+    const PhotonStore& store = storeOf(registry);
+    EXPECT_EQ(store.lights[lightOf(store, a)].photonCount, 1'500u);
+    EXPECT_EQ(store.lights[lightOf(store, b)].photonCount, 1'500u);
+    EXPECT_LE(store.pathCount(), 3u * 3'000u);
+    expectEachLightsPowerShot(store);
 }
 
 TEST(PhotonUpdate, ALightThatLightsUpWhileTheOthersAreDarkGetsPhotons) {
