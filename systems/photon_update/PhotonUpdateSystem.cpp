@@ -215,6 +215,15 @@ PhotonUpdateSystem::PhotonUpdateSystem(const PhotonSettings& settings) : mSettin
     validatePhotonSettings(settings);
 }
 
+std::vector<PhotonUpdateSystem::LightPhotons> PhotonUpdateSystem::lightPhotons() const {
+    std::vector<LightPhotons> out;
+    out.reserve(mEmitters.size());
+    for (std::size_t l = 0; l < mEmitters.size(); ++l)
+        out.push_back({mEmitters[l].firstPhoton, mEmitters[l].photonCount, mSweeps[l].remaining,
+                       mEmitters[l].absent, mEmitters[l].ghost});
+    return out;
+}
+
 PhotonTracer::Surfaces PhotonUpdateSystem::surfaces() const {
     return {mSettings.seed, mSettings.maxBounces, mAlbedo};
 }

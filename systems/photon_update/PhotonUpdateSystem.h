@@ -139,6 +139,16 @@ public:
     const PhotonSettings& settings() const { return mSettings; }
     const FrameStats& lastFrame() const { return mStats; }
 
+    /// One light's photons as the system holds them (for tools and tests): its range of the
+    /// store's paths, the photons left to re-shoot since it last changed, and whether it is
+    /// absent (no source lists it) or a ghost (holding a light's former photons).
+    struct LightPhotons {
+        std::uint32_t first = 0, count = 0, remaining = 0;
+        bool absent = false, ghost = false;
+    };
+    /// Per light, in the order of PhotonStore::lights.
+    std::vector<LightPhotons> lightPhotons() const;
+
 private:
     struct Mobile {
         Entity entity;
