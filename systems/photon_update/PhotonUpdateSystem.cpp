@@ -50,11 +50,6 @@ constexpr std::size_t kRebuildRecurringMultiple = 8;
 // noise. Once a deal is due, lights this far off are dealt anew along with it.
 constexpr double kShareDrift = 4.0;
 constexpr double kRedealAlong = 2.0;
-// Photons for lights added in play, and for shares dealt anew, come from ranges no light needs
-// any more, else from the store's end, up to kMaxPhotonGrowth times PhotonSettings::photonCount
-// in all: room for shares dealt anew on top of lights added. A path that holds nothing costs
-// 8 bytes, and a few bits in the path grid.
-constexpr std::size_t kMaxStoreGrowth = kMaxPhotonGrowth;
 // reuseLandedPaths: a segment tested again lands where it did within this fraction of the
 // scene box's diagonal (the rounding of a ray mapped into a translated instance is far below
 // it).
@@ -448,7 +443,7 @@ void PhotonUpdateSystem::mergeFreeRanges(PhotonStore& store) {
 }
 
 std::uint32_t PhotonUpdateSystem::roomFor(const PhotonStore& store, std::uint32_t count) const {
-    const std::size_t limit = kMaxStoreGrowth * std::size_t(mSettings.photonCount);
+    const std::size_t limit = std::size_t(kMaxPhotonGrowth) * mSettings.photonCount;
     std::size_t room = limit > store.paths.size() ? limit - store.paths.size() : 0;
     for (const std::size_t l : mFree)
         room = std::max<std::size_t>(room, mEmitters[l].photonCount);
@@ -477,6 +472,13 @@ void PhotonUpdateSystem::takeRange(PhotonStore& store, std::size_t owner, std::u
     }
     setRange(store, owner, first, count);
     mSweeps[owner] = Sweep{count, 0};
+}
+
+bool PhotonUpdateSystem::takeShare(PhotonStore& store, std::size_t l, std::uint32_t share) {
+    const std::uint32_t count = roomFor(store, share);
+    if (double(count) * kShareDrift < double(share)) return false;
+    takeRange(store, l, count);
+    return true;
 }
 
 bool PhotonUpdateSystem::retire(PhotonStore& store, std::size_t l) {
@@ -521,8 +523,7 @@ bool PhotonUpdateSystem::addPhotons(PhotonStore& store) {
     if (!(waiting > 0.0)) return true;
     // Photons per watt: the lit lights', so every photon carries the same power, but never
     // fewer than photonCount over all the lights that shine (when the lights with photons
-    // have few, a big one removed, the new ones restore the count). A light short of room
-    // takes what there is, down to a quarter of its share (the drift redealDrifted tolerates).
+    // have few, a big one removed, the new ones restore the count). Short of room, takeShare.
     const double rate = std::max(litPhotons > 0.0 ? litPhotons / litPower : 0.0,
                                  mSettings.photonCount / (litPower + waiting));
     for (std::size_t l = 0; l < mEmitters.size(); ++l) {
@@ -530,11 +531,9 @@ bool PhotonUpdateSystem::addPhotons(PhotonStore& store) {
         if (!carriesPower(e.power) || e.photonCount > 0) continue;
         const auto wanted =
             std::uint32_t(std::min(std::floor(rate * wattsOf(e.power) + 0.5),
-                                   double(kMaxStoreGrowth) * mSettings.photonCount));
+                                   double(kMaxPhotonGrowth) * mSettings.photonCount));
         if (wanted == 0) continue; // a share under half a photon
-        const std::uint32_t count = roomFor(store, wanted);
-        if (double(count) * kShareDrift < double(wanted)) return false;
-        takeRange(store, l, count);
+        if (!takeShare(store, l, wanted)) return false;
     }
     return true;
 }
@@ -570,15 +569,11 @@ bool PhotonUpdateSystem::redealDrifted(PhotonStore& store) {
         if (carriesPower(mEmitters[l].power) && off(mEmitters[l], kRedealAlong))
             mDrifted.emplace_back(l, std::uint32_t(std::floor(shareOf(mEmitters[l]) + 0.5)));
     // Each light's photons go dark (a ghost re-shoots them empty) while its share is shot
-    // from a range of its own: its light fades from the old photons to the new. Short of
-    // room, it takes what there is, down to a quarter of its share.
+    // from a range of its own: its light fades from the old photons to the new.
     for (const auto& [l, share] : mDrifted)
         if (!retire(store, l)) return false;
-    for (const auto& [l, share] : mDrifted) {
-        const std::uint32_t count = roomFor(store, share);
-        if (double(count) * kShareDrift < double(share)) return false;
-        if (count > 0) takeRange(store, l, count);
-    }
+    for (const auto& [l, share] : mDrifted)
+        if (!takeShare(store, l, share)) return false;
     mStats.redealtLights = mDrifted.size();
     return true;
 }

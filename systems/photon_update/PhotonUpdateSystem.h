@@ -220,11 +220,15 @@ private:
     /// mergeFreeRanges lists them in mFree, neighbours merged into one.
     void mergeFreeRanges(PhotonStore& store);
     /// The most photons, up to `count`, that takeRange can give one light: the largest free
-    /// range, or what the store may still grow by (kMaxStoreGrowth).
+    /// range, or what the store may still grow by (to kMaxPhotonGrowth times photonCount; a
+    /// path that holds nothing costs 8 bytes and a few bits in the path grid).
     std::uint32_t roomFor(const PhotonStore& store, std::uint32_t count) const;
     /// Gives light `owner` (which has none) `count` photons, all empty paths, and starts its
     /// sweep: the smallest free range that holds them, else appended. count <= roomFor.
     void takeRange(PhotonStore& store, std::size_t owner, std::uint32_t count);
+    /// Light l (which has none) takes its `share` (>= 1) of photons, or what room there is down
+    /// to a quarter of it (the drift redealDrifted tolerates); false when there is less.
+    bool takeShare(PhotonStore& store, std::size_t l, std::uint32_t share);
     /// Hands light l's photons to a ghost, which re-shoots them empty within the budget (the
     /// light's old light fades while its new photons are shot); false when no emitter slot is
     /// left (kMaxLights).
