@@ -47,6 +47,29 @@ public:
         }
     }
 
+    /// Removes the resource of type T and hands it over (null when there is none), so that it
+    /// can be put back with adopt(): a system can then be run as if the resource were absent.
+    template <typename T> std::shared_ptr<T> take() {
+        const std::size_t id = typeId<T>();
+        if (id >= mSlots.size() || !mSlots[id]) return nullptr;
+        std::shared_ptr<T> taken = std::static_pointer_cast<T>(std::move(mSlots[id]));
+        mSlots[id].reset();
+        std::erase(mOrder, id);
+        return taken;
+    }
+
+    /// Holds `resource` (not null) as the resource of type T; there must be none yet.
+    template <typename T> T& adopt(std::shared_ptr<T> resource) {
+        QGI_ASSERT(resource, "context: adopting no ", typeName<T>());
+        const std::size_t id = typeId<T>();
+        if (id >= mSlots.size()) mSlots.resize(id + 1);
+        QGI_ASSERT(!mSlots[id], "context already holds a ", typeName<T>());
+        T& ref = *resource;
+        mSlots[id] = std::move(resource);
+        mOrder.push_back(id);
+        return ref;
+    }
+
     template <typename T> bool contains() const { return find<T>() != nullptr; }
 
     template <typename T> T* find() {

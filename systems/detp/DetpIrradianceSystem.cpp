@@ -255,9 +255,11 @@ void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t first
 }
 
 Aabb DetpIrradianceSystem::discBounds(std::uint32_t receiver) const {
-    // A crossing point lies within r of a vertex; 1% more covers rounding.
+    // A crossing point lies within r of a vertex (1% more covers rounding), and the segment
+    // that crosses may end up to crossingTail() before it: the box reaches every such
+    // segment's end, so that paths found by their segments' boxes (the path grid) include it.
     Aabb box = mReceivers.receivers()[receiver].bounds;
-    const glm::vec3 reach(1.01f * mRadius);
+    const glm::vec3 reach(1.01f * mRadius + crossingTail());
     box.min -= reach;
     box.max += reach;
     return box;

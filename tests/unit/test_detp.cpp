@@ -958,11 +958,34 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
                                  {{o.x, 0.f, o.z}, up, kInf, glm::vec3(5e-4f), {}, 0, 1}};
         appendPath(store, path);
     }
+    // A photon skimming in along -x that stops short of the plate's plane (landing on a
+    // surface that folds there) and still counts (up to kDiscEndTolerance radii short): it
+    // crosses the disc of the plate's edge vertex at (2.75, 0.8, 3) where the plate will be,
+    // within a radius of it, but ends more than 1.01 radii out along x. Its path held a segment
+    // far from the plate when the grid was built, then was re-traced into this one: the grid
+    // finds it by the box of its new segment alone, not by its cells.
+    constexpr float r = 0.06f;
+    const glm::vec3 skim = glm::normalize(glm::vec3(-1.f, -0.01f, 0.f));
+    const glm::vec3 crossing(2.75f + 0.995f * r, 0.8f, 3.f);
+    const float shortBy = 0.019f * r, length = 0.5f;
+    const glm::vec3 skimOrigin = crossing - length * skim;
+    ASSERT_TRUE(crossesDisc(skimOrigin, skim, length - shortBy, {2.75f, 0.8f, 3.f},
+                            {0.f, 1.f, 0.f}, r));
+    ASSERT_GT(skimOrigin.x + (length - shortBy) * skim.x, 2.75f + 1.01f * r);
+    const auto skimPath = std::uint32_t(store.pathCount());
+    const Segment farAway[1] = {{{0.5f, 1.5f, 0.5f}, {0.f, -1.f, 0.f}, 1.5f, glm::vec3(1.f), floor}};
+    appendPath(store, farAway);
+
     PhotonPathGrid& grid = registry.ctx().emplace<PhotonPathGrid>();
     grid.build(store, Aabb{{0.f, 0.f, 0.f}, {4.f, 2.f, 4.f}}, 32);
+    const std::uint32_t skimSegment = store.paths[skimPath].first;
+    store.segments.origin[skimSegment] = skimOrigin;
+    store.segments.direction[skimSegment] = skim;
+    store.segments.length[skimSegment] = length - shortBy;
+    grid.markChanged(store, std::span(&skimPath, 1));
 
     DetpSettings settings;
-    settings.discRadius = 0.06f;
+    settings.discRadius = r;
     DetpIrradianceSystem system(settings);
     system.build(registry);
     system.update(registry, {});
@@ -975,6 +998,13 @@ TEST(Detp, MovedMobileIsReestimatedFromThePathGridAlone) {
     EXPECT_GT(system.lastFrame().crossings, 1000u);
     EXPECT_LT(system.lastFrame().candidatePaths, store.pathCount() / 4);
     const std::vector<glm::vec3> fromGrid = registry.get<VertexIrradiance>(plate).irradiance;
+    // The skimmer's watt, over the disc, is most of that vertex's irradiance.
+    const auto& plateMesh = registry.get<Mesh>(plate);
+    std::size_t edgeVertex = plateMesh.positions.size();
+    for (std::size_t v = 0; v < plateMesh.positions.size(); ++v)
+        if (glm::distance(plateMesh.positions[v], glm::vec3(0.25f, 0.f, 0.f)) < 1e-6f) edgeVertex = v;
+    ASSERT_LT(edgeVertex, plateMesh.positions.size());
+    EXPECT_GT(fromGrid[edgeVertex].x, 0.9f / (glm::pi<float>() * r * r));
 
     // The same plate estimated against every stored segment: the grid's candidates are summed in
     // the same (path) order, so the values are the same bit for bit.

@@ -195,6 +195,20 @@ TEST(Ecs, ContextHoldsOneResourcePerTypePerRegistry) {
     EXPECT_EQ(r1.ctx().find<Counter>(), nullptr);
 }
 
+TEST(Ecs, ContextResourceTakenOutAndAdoptedBackIsTheSameObject) {
+    Registry r;
+    EXPECT_EQ(r.ctx().take<Counter>(), nullptr); // nothing to take
+    Counter& held = r.ctx().emplace<Counter>(Counter{3});
+    const std::shared_ptr<Counter> taken = r.ctx().take<Counter>();
+    ASSERT_NE(taken, nullptr);
+    EXPECT_EQ(taken.get(), &held);
+    EXPECT_FALSE(r.ctx().contains<Counter>());
+    r.ctx().emplace<Counter>(Counter{4}); // the slot is free for another while it is out
+    r.ctx().erase<Counter>();
+    EXPECT_EQ(&r.ctx().adopt(taken), &held);
+    EXPECT_EQ(r.ctx().get<Counter>().value, 3);
+}
+
 TEST(Ecs, ViewEntitiesSnapshotAllowsStructuralChangeAfterwards) {
     Registry r;
     for (int i = 0; i < 20; ++i) r.emplace<Position>(r.create(), float(i));

@@ -476,17 +476,21 @@ double roundingBound(const DetpSettings& settings, const SumRounding& rounding,
 }
 
 /// The VertexIrradiance of `meshes` (an incremental system's) against a fresh system's full
-/// estimate over the current ray set, within `absolute` plus float rounding. The incremental
-/// values are put back, so that the incremental system goes on from its own.
+/// estimate over the current ray set, within `absolute` plus float rounding. The reference
+/// runs without the path grid, so that it re-estimates the mobiles from every path, not from
+/// the paths the grid finds near them as the incremental system does. The incremental values
+/// are put back, so that the incremental system goes on from its own.
 void expectIrradianceOfAFullEstimate(Registry& registry, const DetpSettings& settings,
                                      const std::vector<Entity>& meshes, double absolute,
                                      int frame) {
     std::vector<std::vector<glm::vec3>> incremental;
     for (const Entity e : meshes)
         incremental.push_back(registry.get<VertexIrradiance>(e).irradiance);
+    const std::shared_ptr<PhotonPathGrid> grid = registry.ctx().take<PhotonPathGrid>();
     DetpIrradianceSystem reference(settings);
     reference.build(registry);
     reference.update(registry, FrameContext{});
+    if (grid) registry.ctx().adopt(grid);
     for (std::size_t m = 0; m < meshes.size(); ++m) {
         auto& full = registry.get<VertexIrradiance>(meshes[m]).irradiance;
         for (std::size_t v = 0; v < full.size(); ++v)
