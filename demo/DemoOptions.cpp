@@ -168,7 +168,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "Writes the loaded scene as glTF (.gltf or .glb) with qgi's conventions");
     app.add_option(
         "--export-irradiance", o.exportIrradiance,
-        "Writes per-vertex irradiance after the last frame as PLY: x y z nx ny nz, "
+        "Writes per-vertex irradiance after the last frame as binary little-endian PLY: "
+        "x y z nx ny nz, "
         "er eg eb (W/m^2) and a mobile flag per vertex. In hybrid mode it leaves out "
         "the direct light the renderer draws (of point, spot and directional lights, "
         "and of emissive surfaces with a light stand-in); "

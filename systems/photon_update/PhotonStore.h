@@ -32,6 +32,7 @@ struct PhotonSegments {
     static constexpr std::size_t kBytesPerSegment = 3 * sizeof(glm::vec3) + sizeof(float) +
                                                     sizeof(Entity) + sizeof(std::uint32_t) +
                                                     sizeof(std::uint8_t);
+    static_assert(kBytesPerSegment == 53, "the documents quote 53 bytes per segment");
 
     std::size_t size() const { return origin.size(); }
     void clear();

@@ -196,6 +196,8 @@ ExportedLight exportLight(const std::string& name, const std::string& options, i
 TEST(DemoSmoke, LightingOptionsReachTheExportedIrradiance) {
     const ExportedLight base = exportLight("light_base", "--mode photon");
     ASSERT_FALSE(base.ply.positions.empty());
+    // --photons reaches the photon update: the store holds that many paths.
+    EXPECT_NE(base.output.find("photons: 20000 from "), std::string::npos) << base.output;
 
     // One row per vertex of every static and mobile mesh (not the avatars), the mobile
     // block's flagged.
