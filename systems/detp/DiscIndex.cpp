@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -138,6 +139,7 @@ void DiscIndex::Layout::clear() {
     patchVertices.clear();
     patchTriangles.clear();
     direct = false;
+    sieve = {};
 }
 
 DiscIndex::DiscIndex(EmbreeDevice& device, Motion motion)
@@ -320,9 +322,87 @@ void DiscIndex::makeLayout(std::span<const glm::vec3> centers, std::span<const g
         out.pointNormals.push_back(normals[i]);
     }
     out.pointNormals.push_back(glm::vec3(0.f)); // the padding
-    if (out.direct) return;                     // no Embree: no rectangles
+    if (out.direct) {                           // no Embree: no rectangles
+        makeSieve(radius, out);
+        return;
+    }
     for (std::uint32_t p = 0; p < out.planes.size(); ++p)
         addRectangles(p, radius, out, scratch);
+}
+
+void DiscIndex::makeSieve(float radius, Layout& layout) {
+    PlaneSieve& sieve = layout.sieve;
+    sieve = {};
+    sieve.count = std::uint32_t(layout.planes.size());
+    QGI_ASSERT(sieve.count <= PlaneSieve::kLanes, "a direct query has at most 16 planes");
+    for (std::uint32_t p = 0; p < sieve.count; ++p) {
+        const Plane& plane = layout.planes[p];
+        glm::vec3 n;
+        float offset;
+        if (plane.tilted) {
+            n = glm::vec3(plane.unitNormal);
+            offset = float(plane.offset);
+            // At or above minCosine crossPlane() either turns the segment down (from behind)
+            // or tests every disc (grazing); the 1e-2 floor keeps the float crossing within
+            // the margins below.
+            sieve.grazing[p] = float(std::max(1e-2, 1.001 * plane.minCosine + 1e-6));
+            sieve.facing[p] = sieve.grazing[p];
+        } else {
+            // d . n is d[axis] * normal[axis] exactly (the other terms are zeros), so the facing
+            // test is crossPlane()'s own.
+            n = plane.normal;
+            offset = plane.normal[plane.axis] * plane.coordinate;
+            sieve.grazing[p] = 1e-2f;
+            sieve.facing[p] = 0.f;
+        }
+        sieve.nx[p] = n.x;
+        sieve.ny[p] = n.y;
+        sieve.nz[p] = n.z;
+        sieve.offset[p] = offset;
+        // A disc crossPlane() accepts has its centre within a radius of its own crossing
+        // point, which lies within kTiltedReachRadii radii of the plane's (none for an exact
+        // plane): well within kLookupReach radii of the centres' box.
+        glm::vec3 low(std::numeric_limits<float>::max()), high(-low);
+        const std::uint32_t end = layout.cellStart[plane.firstCell + plane.cellCount()];
+        for (std::uint32_t j = layout.cellStart[plane.firstCell]; j < end; ++j) {
+            low = glm::min(low, layout.cellCenters[j]);
+            high = glm::max(high, layout.cellCenters[j]);
+        }
+        const float reach = float(kLookupReach) * radius;
+        sieve.lowX[p] = low.x - reach;
+        sieve.lowY[p] = low.y - reach;
+        sieve.lowZ[p] = low.z - reach;
+        sieve.highX[p] = high.x + reach;
+        sieve.highY[p] = high.y + reach;
+        sieve.highZ[p] = high.z + reach;
+    }
+}
+
+std::uint32_t DiscIndex::PlaneSieve::candidates(const glm::vec3& o, const glm::vec3& d, float start,
+                                                float stop) const {
+    // Float rounding of the crossing (t and the point) stays below 2.5e-5 of
+    // |offset| + |o|_1 + |t| where |cos| >= 1e-2 (about 400 float steps): the margin is four
+    // times that. Comparisons are written so that NaN keeps a plane.
+    const float size = std::abs(o.x) + std::abs(o.y) + std::abs(o.z);
+    std::array<std::uint32_t, kLanes> keep;
+    for (std::size_t p = 0; p < kLanes; ++p) {
+        const float cosine = d.x * nx[p] + d.y * ny[p] + d.z * nz[p];
+        const float t = (offset[p] - (o.x * nx[p] + o.y * ny[p] + o.z * nz[p])) / cosine;
+        const float margin = 1e-4f * (std::abs(offset[p]) + size + std::abs(t));
+        const float x = o.x + t * d.x, y = o.y + t * d.y, z = o.z + t * d.z;
+        // Bitwise, not short-circuit: no branches, so the loop vectorises.
+        const bool away = cosine >= facing[p];
+        const bool grazes = std::abs(cosine) < grazing[p];
+        const bool outside = (t < start - margin) | (t > stop + margin) | (x < lowX[p] - margin) |
+                             (x > highX[p] + margin) | (y < lowY[p] - margin) |
+                             (y > highY[p] + margin) | (z < lowZ[p] - margin) |
+                             (z > highZ[p] + margin);
+        keep[p] = std::uint32_t((!away) & (grazes | (!outside)));
+    }
+    std::uint32_t mask = 0;
+    for (std::size_t p = 0; p < kLanes; ++p)
+        mask |= keep[p] << p;
+    return mask & ((std::uint32_t(1) << count) - 1u);
 }
 
 void DiscIndex::groupDiscs(std::span<const glm::vec3> centers, std::span<const glm::vec3> normals,
@@ -730,8 +810,14 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
         if (!(start <= stop)) continue; // misses the box: no disc to cross
         if (mLayout.direct) {           // plane by plane: they are few
             const double range[2] = {start, stop};
-            for (const Plane& plane : mLayout.planes)
-                crossPlane(context, std::uint32_t(k), s, plane, range);
+            const std::size_t first = pairs.size();
+            for (std::uint32_t planes = mLayout.sieve.candidates(o, d, float(start), float(stop));
+                 planes != 0; planes &= planes - 1)
+                crossPlane(context, std::uint32_t(k), s, mLayout.planes[std::countr_zero(planes)],
+                           range);
+            // The canonical order, segment by segment (a disc sits in one plane's grid once,
+            // and each plane is looked up once: no pair comes twice).
+            std::sort(pairs.begin() + std::ptrdiff_t(first), pairs.end());
             continue;
         }
         RTCRay ray;
@@ -749,6 +835,7 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
         ray.flags = 0;
         rtcOccluded1(mScene.get(), &context.embree, &ray);
     }
+    if (mLayout.direct) return; // in order already
     // Canonical order; a disc Embree reports twice for one segment is counted once.
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
