@@ -17,6 +17,7 @@
 #include "demo/Overlay.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
+#include "runtime/io/AtomicFile.h"
 #include "runtime/io/CacheFile.h"
 #include "runtime/io/IrradianceExport.h"
 #include "runtime/profile/FrameProfiler.h"
@@ -197,7 +198,8 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
     for (const char* extension : extensions)
         files.emplace_back(*base + extension);
     for (const fs::path& file : files) {
-        const fs::path name = fs::weakly_canonical(file, error);
+        // The file a write changes: through symbolic links, dangling ones included.
+        const fs::path name = writeTarget(file);
         for (const auto& [other, by] : written)
             if (name == other) fail(option, ": '", file.string(), "' is written by ", by, " too");
         written.emplace_back(name, option);
@@ -288,14 +290,26 @@ int runDemo(const DemoOptions& options) {
     ownExportOnly(options.exportIrradiance, "--export-irradiance", isIrradiancePly,
                   "an irradiance export");
     ownExportOnly(options.exportAvatars, "--export-avatars", isAvatarShCsv, "an avatar SH export");
-    // Cache files are rewritten when stale: never over somebody's file.
+    // Cache files are rewritten when stale: never over somebody's file, nor over another
+    // output of the run.
     const bool pointCacheNamed =
         options.pointCacheFile != "auto" && options.pointCacheFile != "none";
-    if (pointCacheNamed)
+    const bool vlfCacheNamed = options.vlfCache != "auto" && options.vlfCache != "none";
+    const auto cacheIsNoOtherOutput = [&](const std::string& cache, const char* option) {
+        const std::filesystem::path name = writeTarget(cache);
+        for (const auto& [other, by] : written)
+            if (name == other) fail(option, ": '", cache, "' is written by ", by, " too");
+        written.emplace_back(name, option);
+    };
+    if (pointCacheNamed) {
+        cacheIsNoOtherOutput(options.pointCacheFile, "--point-cache-file");
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
                          "point cache file (--point-cache-file)");
-    if (options.vlfCache != "auto" && options.vlfCache != "none")
+    }
+    if (vlfCacheNamed) {
+        cacheIsNoOtherOutput(options.vlfCache, "--vlf-cache");
         checkCacheTarget(options.vlfCache, vlf::VlfCache::kMagic, "VLF cache file (--vlf-cache)");
+    }
 
     // The window comes first: without a GL 4.5 context there is nothing to show, and the user
     // should learn that before a long scene load.

@@ -1,12 +1,14 @@
 #include "runtime/io/Exr.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/io/AtomicFile.h"
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfOutputFile.h>
+#include <ImfStdIO.h>
 #include <half.h>
 
 #include <array>
@@ -48,13 +50,15 @@ void writeExr(const std::filesystem::path& path, int width, int height,
         frame.insert(kChannelNames[c], Imf::Slice::Make(type, first, header.dataWindow(), stride,
                                                         stride * std::size_t(width)));
     }
+    Imf::StdOSStream encoded;
     try {
-        Imf::OutputFile file(path.c_str(), header);
+        Imf::OutputFile file(encoded, header);
         file.setFrameBuffer(frame);
         file.writePixels(height);
     } catch (const std::exception& e) {
         fail("cannot write EXR '", path.string(), "': ", e.what());
     }
+    writeFileAtomically(path, encoded.str(), "EXR");
 }
 
 ImageF readExr(const std::filesystem::path& path) {

@@ -1,4 +1,5 @@
 #include "runtime/io/Ply.h"
+#include "runtime/io/AtomicFile.h"
 
 #include "runtime/core/Error.h"
 
@@ -163,9 +164,7 @@ void writePly(const std::filesystem::path& path, std::span<const glm::vec3> posi
         }
     }
 
-    std::ofstream file(path, std::ios::binary | std::ios::trunc);
-    file.write(out.data(), std::streamsize(out.size()));
-    if (!file) fail("cannot write PLY '", path.string(), "'");
+    writeFileAtomically(path, out, "PLY");
 }
 
 bool isIrradiancePly(const std::filesystem::path& path) {

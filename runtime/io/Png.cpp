@@ -1,6 +1,7 @@
 #include "runtime/io/Png.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/io/AtomicFile.h"
 
 // stb's implementation comes from Debian's libstb (linked through pkg-config), the same copy
 // tinygltf uses: defining STB_*_IMPLEMENTATION here would shadow it with a second, narrower one.
@@ -8,6 +9,7 @@
 #include <stb/stb_image_write.h>
 
 #include <memory>
+#include <string>
 
 namespace qgi {
 
@@ -18,8 +20,14 @@ void writePng(const std::filesystem::path& path, int width, int height,
     if (rgba.size() != std::size_t(width) * std::size_t(height) * 4)
         fail("cannot write PNG '", path.string(), "': ", rgba.size(), " bytes for ", width, "x",
              height, " RGBA");
-    if (!stbi_write_png(path.string().c_str(), width, height, 4, rgba.data(), width * 4))
-        fail("cannot write PNG '", path.string(), "'");
+    std::string bytes;
+    const auto append = [](void* context, void* data, int size) {
+        static_cast<std::string*>(context)->append(static_cast<const char*>(data),
+                                                   std::size_t(size));
+    };
+    if (!stbi_write_png_to_func(append, &bytes, width, height, 4, rgba.data(), width * 4))
+        fail("cannot write PNG '", path.string(), "': encoding failed");
+    writeFileAtomically(path, bytes, "PNG");
 }
 
 Image8 readPng(const std::filesystem::path& path) {

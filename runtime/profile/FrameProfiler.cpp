@@ -1,11 +1,11 @@
 #include "runtime/profile/FrameProfiler.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/io/AtomicFile.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <iomanip>
 #include <sstream>
 
@@ -40,12 +40,6 @@ void writeJsonString(std::ostream& out, std::string_view s) {
         }
     }
     out << '"';
-}
-
-std::ofstream openForWrite(const std::filesystem::path& path) {
-    std::ofstream out(path);
-    if (!out) fail(path.string(), ": cannot open for writing");
-    return out;
 }
 
 } // namespace
@@ -195,7 +189,7 @@ std::string FrameProfiler::summaryTable() const {
 }
 
 void FrameProfiler::writeChromeTrace(const std::filesystem::path& path) const {
-    std::ofstream out = openForWrite(path);
+    std::ostringstream out;
     out << std::fixed << std::setprecision(3);
     out << "{\"displayTimeUnit\":\"ms\",\"traceEvents\":[\n";
     out << R"({"name":"thread_name","ph":"M","pid":1,"tid":1,"args":{"name":"CPU"}},)" << '\n';
@@ -214,11 +208,11 @@ void FrameProfiler::writeChromeTrace(const std::filesystem::path& path) const {
         }
     }
     out << "\n]}\n";
-    if (!out) fail(path.string(), ": write failed");
+    writeFileAtomically(path, out.view(), "the profile trace");
 }
 
 void FrameProfiler::writeCsv(const std::filesystem::path& path) const {
-    std::ofstream out = openForWrite(path);
+    std::ostringstream out;
     out << "frame,frame_ms";
     for (const std::string& name : mNames) out << ',' << name << "_ms";
     out << '\n' << std::fixed << std::setprecision(4);
@@ -232,7 +226,7 @@ void FrameProfiler::writeCsv(const std::filesystem::path& path) const {
         }
         out << '\n';
     }
-    if (!out) fail(path.string(), ": write failed");
+    writeFileAtomically(path, out.view(), "the profile CSV");
 }
 
 } // namespace qgi

@@ -35,6 +35,7 @@
 #include "components/SpotLight.h"
 #include "components/Transform.h"
 #include "runtime/core/Log.h"
+#include "runtime/io/AtomicFile.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneQueries.h"
 #include "runtime/scene/TextureLibrary.h"
@@ -43,6 +44,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <sstream>
 #include <unordered_map>
 
 namespace qgi {
@@ -323,16 +325,19 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
     model.scenes.push_back(std::move(scene));
     model.defaultScene = 0;
 
+    // Encoded in memory (buffers and images embedded), then written as a whole: tinygltf's own
+    // file writer does not notice a full disk.
     tinygltf::TinyGLTF writer;
+    std::ostringstream encoded;
     bool written = false;
     try {
-        written = writer.WriteGltfSceneToFile(&model, path.string(), /*embedImages*/ true,
-                                              /*embedBuffers*/ true, /*prettyPrint*/ true,
-                                              /*writeBinary*/ extension == ".glb");
+        written = writer.WriteGltfSceneToStream(&model, encoded, /*prettyPrint*/ true,
+                                                /*writeBinary*/ extension == ".glb");
     } catch (const std::exception& e) {
         fail(label, ": cannot write: ", e.what());
     }
-    if (!written) fail(label, ": cannot write '", path.string(), "'");
+    if (!written) fail(label, ": cannot encode '", path.string(), "'");
+    writeFileAtomically(path, encoded.view(), "glTF");
 }
 
 } // namespace qgi

@@ -1,5 +1,6 @@
 #include "systems/point_cache/PointCacheFile.h"
 
+#include "runtime/io/AtomicFile.h"
 #include "runtime/io/CacheFile.h"
 
 #include "components/Material.h"
@@ -140,16 +141,7 @@ void writePointCacheFile(const std::string& path, std::uint64_t key, const Point
     sum.addBytes(out.data(), out.size());
     putValue(out, sum.value());
 
-    const std::string temp = path + ".tmp";
-    {
-        std::ofstream file(temp, std::ios::binary | std::ios::trunc);
-        if (!file) fail("cannot write point cache file '", temp, "'");
-        file.write(out.data(), std::streamsize(out.size()));
-        if (!file) fail("cannot write point cache file '", temp, "'");
-    }
-    std::error_code error;
-    std::filesystem::rename(temp, path, error);
-    if (error) fail("cannot rename '", temp, "' to '", path, "': ", error.message());
+    writeFileAtomically(path, std::string_view(out.data(), out.size()), "point cache file");
 }
 
 void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& cache) {

@@ -6,9 +6,11 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/io/AtomicFile.h"
 
 #include <cstdio>
 #include <fstream>
+#include <sstream>
 
 namespace qgi {
 namespace {
@@ -52,8 +54,7 @@ bool isAvatarShCsv(const std::filesystem::path& path) {
 }
 
 void exportAvatarSh(const Registry& registry, const std::filesystem::path& path) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    if (!out) fail("cannot open '", path.string(), "' for writing the avatar SH export");
+    std::ostringstream out;
     out << avatarShCsvHeader() << '\n';
     registry.view<const Avatar, const WorldTransform, const ShLighting>().each(
         [&](Entity e, const Avatar&, const WorldTransform& world, const ShLighting& lighting) {
@@ -65,8 +66,7 @@ void exportAvatarSh(const Registry& registry, const std::filesystem::path& path)
                 out << ',' << number(c.r) << ',' << number(c.g) << ',' << number(c.b);
             out << '\n';
         });
-    out.flush();
-    if (!out) fail("writing the avatar SH export to '", path.string(), "' failed");
+    writeFileAtomically(path, out.view(), "the avatar SH export");
 }
 
 } // namespace qgi

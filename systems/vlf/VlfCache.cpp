@@ -1,5 +1,6 @@
 #include "systems/vlf/VlfCache.h"
 
+#include "runtime/io/AtomicFile.h"
 #include "runtime/io/CacheFile.h"
 
 #include "runtime/core/Error.h"
@@ -98,23 +99,16 @@ void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
     Fnv1aHasher h;
     h.addBytes(w.bytes.data(), w.bytes.size());
     checkCacheTarget(path, kMagic, "VLF cache file");
-    const std::filesystem::path tmp = path.string() + ".tmp";
-    {
-        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (!out) fail(path.string(), ": cannot write the VLF cache");
-        out.write(kMagic.data(), std::streamsize(kMagic.size()));
-        const std::uint32_t version = kVersion;
-        const std::uint64_t key = v.mKey, size = w.bytes.size(), hash = h.value();
-        out.write(reinterpret_cast<const char*>(&version), sizeof(version));
-        out.write(reinterpret_cast<const char*>(&key), sizeof(key));
-        out.write(reinterpret_cast<const char*>(&size), sizeof(size));
-        out.write(reinterpret_cast<const char*>(&hash), sizeof(hash));
-        out.write(w.bytes.data(), std::streamsize(w.bytes.size()));
-        if (!out) fail(path.string(), ": writing the VLF cache failed");
-    }
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) fail(path.string(), ": cannot move the VLF cache into place: ", ec.message());
+    std::string file(kMagic.data(), kMagic.size());
+    const auto append = [&](const auto& value) {
+        file.append(reinterpret_cast<const char*>(&value), sizeof(value));
+    };
+    append(std::uint32_t(kVersion));
+    append(std::uint64_t(v.mKey));
+    append(std::uint64_t(w.bytes.size()));
+    append(std::uint64_t(h.value()));
+    file.append(w.bytes.data(), w.bytes.size());
+    writeFileAtomically(path, file, "the VLF cache");
 }
 
 Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey) {

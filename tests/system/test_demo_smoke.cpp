@@ -407,6 +407,7 @@ TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
     std::ofstream(path) << "0,0,0.3,1,0,0\n";
     const fs::path fifo = dir / "pipe.png";
     ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    fs::create_symlink("light.ply", dir / "link.ply");
     for (const auto& [options, says] :
          {std::pair{"--camera-path " + path.string() + " --export-avatars " + path.string(),
                     std::string("is an input of this run")},
@@ -414,7 +415,15 @@ TEST(DemoSmoke, OutputsNeverOverwriteTheSceneOrSomebodysFile) {
                         (dir / "run.csv").string(),
                     std::string("is written by --profile too")},
           std::pair{"--screenshot " + (dir / "pipe").string(),
-                    std::string("is not a regular file")}}) {
+                    std::string("is not a regular file")},
+          // A dangling link to another output's file names that file.
+          std::pair{"--export-irradiance " + (dir / "light.ply").string() + " --export-avatars " +
+                        (dir / "link.ply").string(),
+                    std::string("is written by --export-irradiance too")},
+          // A cache file is an output too.
+          std::pair{"--vlf on --vlf-cache " + (dir / "field.ply").string() +
+                        " --export-irradiance " + (dir / "field.ply").string(),
+                    std::string("is written by --export-irradiance too")}}) {
         const RunResult run =
             runDemo("--scene cornell --headless --frames 1 --photons 1000 " + options);
         EXPECT_EQ(run.exitCode, 1) << options << run.output;

@@ -1,6 +1,7 @@
 // Round trips and failure modes of the image and mesh file writers (runtime/io).
 
 #include "runtime/core/Error.h"
+#include "runtime/io/AtomicFile.h"
 #include "runtime/io/Exr.h"
 #include "runtime/io/Ply.h"
 #include "runtime/io/Png.h"
@@ -10,6 +11,7 @@
 #include <bit>
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <random>
 
@@ -187,6 +189,51 @@ TEST_F(IoTest, WritesToAMissingFolderThrowNamingThePath) {
     expectErrorNaming([&] { writeExr(missing / "a.exr", 1, 1, rgba, 4); }, missing / "a.exr");
     expectErrorNaming([&] { writePng(missing / "a.png", 1, 1, bytes); }, missing / "a.png");
     expectErrorNaming([&] { writePly(missing / "a.ply", mesh); }, missing / "a.ply");
+}
+
+std::string readAll(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+TEST_F(IoTest, AtomicWriteReplacesTheFileOrLeavesItAsItWas) {
+    const fs::path file = mDir / "out.ply";
+    writeFileAtomically(file, "first", "test file");
+    EXPECT_EQ(readAll(file), "first");
+    writeFileAtomically(file, "second, longer", "test file");
+    EXPECT_EQ(readAll(file), "second, longer");
+    writeFileAtomically(file, "", "test file"); // empty is a file too
+    EXPECT_TRUE(fs::exists(file));
+    EXPECT_EQ(fs::file_size(file), 0u);
+
+    // A write that fails after the temporary file was written (the name is a folder, so the
+    // rename fails) throws naming the path, and leaves the folder as it was: nothing beside it.
+    const fs::path folder = mDir / "taken";
+    fs::create_directories(folder / "inside");
+    expectErrorNaming([&] { writeFileAtomically(folder, "bytes", "test file"); }, folder);
+    EXPECT_TRUE(fs::is_directory(folder / "inside"));
+    std::size_t entries = 0;
+    for ([[maybe_unused]] const auto& entry : fs::directory_iterator(mDir))
+        ++entries;
+    EXPECT_EQ(entries, 2u); // out.ply and taken/: no temporary file left
+    // So does one that cannot open its temporary file (a missing folder).
+    expectErrorNaming([&] { writeFileAtomically(mDir / "missing" / "a", "x", "test file"); },
+                      mDir / "missing" / "a");
+}
+
+TEST_F(IoTest, AtomicWriteThroughASymbolicLinkChangesTheFileItNames) {
+    // A dangling link names the file a write creates: an output clash check compares that.
+    const fs::path target = mDir / "target.csv", link = mDir / "link.csv";
+    fs::create_symlink("target.csv", link);
+    EXPECT_EQ(writeTarget(link), writeTarget(target));
+    EXPECT_EQ(writeTarget(link), fs::weakly_canonical(mDir) / "target.csv");
+    writeFileAtomically(link, "through the link", "test file");
+    EXPECT_TRUE(fs::is_symlink(link));
+    EXPECT_EQ(readAll(target), "through the link");
+    // A loop of links ends the chain; its write fails with an error, not a hang.
+    fs::create_symlink("loop_b", mDir / "loop_a");
+    fs::create_symlink("loop_a", mDir / "loop_b");
+    (void)writeTarget(mDir / "loop_a");
 }
 
 TEST_F(IoTest, ReadsOfMissingOrCorruptFilesThrowNamingThePath) {
