@@ -629,13 +629,27 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
             box.extend(glm::vec3(world * glm::vec4(p, 1.f)));
         return box;
     };
+    // The scene's size, which sets the default edge bound (and from it the disc radius): of
+    // the triangles processing will keep. A degenerate one is dropped, so it must not stretch
+    // the scene (a 20 km line beside a room made the room's edge bound 400 m).
+    const double minArea = double(MeshProcessingOptions{}.minTriangleArea);
     Aabb rawBounds;
     for (const EntityRecord& r : scene.records) {
         if (!r.source) continue;
-        const Aabb box = worldAabb(r.source->mesh, r.world);
+        const Mesh& mesh = r.source->mesh;
+        const Aabb box = worldAabb(mesh, r.world);
         if (!isFinite(box.min) || !isFinite(box.max))
             fail(r.source->field, "world-space positions overflow");
-        rawBounds.extend(box);
+        const auto corner = [&](std::size_t k) {
+            return glm::dvec3(r.world * glm::vec4(mesh.positions[mesh.indices[k]], 1.f));
+        };
+        for (std::size_t k = 0; k + 2 < mesh.indices.size(); k += 3) {
+            const glm::dvec3 a = corner(k), b = corner(k + 1), c = corner(k + 2);
+            if (!hasArea(a, b, c, minArea)) continue;
+            rawBounds.extend(glm::vec3(a));
+            rawBounds.extend(glm::vec3(b));
+            rawBounds.extend(glm::vec3(c));
+        }
     }
     if (!rawBounds.empty()) {
         const double size = glm::length(glm::dvec3(rawBounds.extent()));

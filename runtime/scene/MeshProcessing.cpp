@@ -159,11 +159,10 @@ std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& weld
         const glm::dvec3 a(welded.positions[t[0]]);
         const glm::dvec3 b(welded.positions[t[1]]);
         const glm::dvec3 c(welded.positions[t[2]]);
+        if (!hasArea(a, b, c, double(options.minTriangleArea))) continue;
         const double doubleArea = glm::length(glm::cross(b - a, c - a));
         const double longest2 =
             std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)});
-        if (0.5 * doubleArea < double(options.minTriangleArea)) continue;
-        if (doubleArea <= kMinHeightRatio * longest2) continue;
         // Rotate the smallest index first: the key of a triangle regardless of start corner.
         std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
         if (!seen.insert(t).second) continue;
@@ -177,6 +176,17 @@ std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& weld
     }
     return triangles;
 }
+
+} // namespace
+
+bool hasArea(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c, double minArea) {
+    const double doubleArea = glm::length(glm::cross(b - a, c - a));
+    const double longest2 =
+        std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)});
+    return 0.5 * doubleArea >= minArea && doubleArea > kMinHeightRatio * longest2;
+}
+
+namespace {
 
 OmMesh::Point toOm(const glm::vec3& p) {
     return OmMesh::Point(p.x, p.y, p.z);

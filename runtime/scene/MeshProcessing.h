@@ -2,6 +2,8 @@
 
 #include "components/Mesh.h"
 
+#include <glm/vec3.hpp>
+
 namespace qgi {
 
 struct MeshProcessingOptions {
@@ -25,6 +27,10 @@ struct MeshProcessingOptions {
 /// group). `raw.normals` may be empty; `raw.uvs` is kept (interpolated through refinement).
 /// Throws qgi::Error if a position is NaN or infinite, or an index is out of range.
 Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options);
+
+/// Whether processMesh keeps a triangle of these corners (before welding): area at least
+/// `minArea` and not a sliver (its height at least a millionth of its longest edge).
+bool hasArea(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c, double minArea);
 
 /// Total surface area of a mesh, m^2.
 double meshArea(const Mesh& mesh);

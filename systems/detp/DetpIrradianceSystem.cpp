@@ -61,6 +61,18 @@ void DetpIrradianceSystem::build(Registry& registry) {
             fail("DETP: DetpSettings.discRadius is 0 (scene default) but the registry has no "
                  "SceneInfo to scale it from");
         radius = defaultDiscRadius(*info, area, mSettings.photonCount);
+        // The default widens with the mesh edge bound and as photons get scarce: past a tenth
+        // of the scene it blurs the light over whole walls and reads low near their edges.
+        const float diagonal = info->bounds.empty() ? 0.f : glm::length(info->bounds.extent());
+        if (mSettings.estimator == IrradianceEstimator::Detp && diagonal > 0.f &&
+            radius > kMaxDefaultRadiusShare * diagonal)
+            logWarning("DETP: the default disc radius, ", radius, " m, is ",
+                       std::lround(100.f * radius / diagonal), "% of the scene (", diagonal,
+                       " m across) for ", mSettings.photonCount,
+                       " photons and a mesh edge bound of ", info->maxEdgeLength,
+                       " m: irradiance is blurred over that and reads low near edges; shoot more "
+                       "photons (--photons), refine the meshes (--max-edge) or set the radius "
+                       "(--disc-radius)");
     } else {
         if (info && !info->bounds.empty() && radius > glm::length(info->bounds.extent()))
             fail("DETP: DetpSettings.discRadius = ", radius, " m is wider than the whole scene (",

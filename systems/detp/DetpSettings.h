@@ -54,6 +54,8 @@ inline constexpr float kDefaultDiscLandings = 64.f;
 /// A radius chosen by hand that catches fewer landings than this (with about two counted
 /// segments per landing, a relative noise over a third) is warned about.
 inline constexpr double kFewDiscLandings = 4.0;
+/// A default radius wider than this share of the scene's diagonal is warned about.
+inline constexpr float kMaxDefaultRadiusShare = 0.1f;
 
 /// The default DETP disc radius, the larger of two rules:
 ///  - half the scene's mesh refinement bound (SceneInfo::maxEdgeLength), so a disc covers about

@@ -35,6 +35,8 @@ namespace {
 constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); // PhotonPath::light
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
+// A shot where more of the lit photons than this leave the scene at once is warned about.
+constexpr double kMostlyEscaped = 0.99;
 // The grid refreshes when more paths are changed than 1/64 of all, or than twice the paths
 // re-traced this frame, whichever is more: scanning that many boxes per query costs far less
 // than the frame's re-tracing, and a big mobile re-traces much the same paths every frame.
@@ -753,6 +755,20 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
                 double(store.segments.size() * PhotonSegments::kBytesPerSegment) / kMiB,
                 " MiB (with room for re-traced paths), path grid ",
                 double(grid.memoryBytes()) / kMiB, " MiB");
+        // Lights that light nothing give a dark export and image: say why.
+        std::size_t lit = 0, escaped = 0;
+        for (const PhotonPath& path : store.paths) {
+            if (path.count == 0) continue; // a dark light's photon
+            ++lit;
+            escaped += !store.segments.hitEntity[path.first];
+        }
+        if (mSettings.photonCount > 0 && !mEmitters.empty() && lit == 0)
+            logWarning("photons: every light is off or has no power, so no photon carries light "
+                       "(global illumination stays dark until one lights up)");
+        else if (lit > 0 && double(escaped) > kMostlyEscaped * double(lit))
+            logWarning("photons: ", escaped, " of ", lit,
+                       " photons leave the scene without meeting a surface: are the lights "
+                       "inside the scene, and turned towards it?");
     }
 }
 

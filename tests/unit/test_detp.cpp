@@ -1407,6 +1407,27 @@ TEST(Detp, AHandChosenRadiusThatCatchesFewPhotonsIsWarnedAbout) {
     }
 }
 
+TEST(Detp, ADefaultRadiusWiderThanATenthOfTheSceneIsWarnedAbout) {
+    // The unit floor (1 m^2, 1.41 m across) and a 2 cm edge bound: 100 photons widen the
+    // default radius to sqrt(64 / (100 pi)) = 0.45 m, a third of the scene; 100,000 give
+    // 1.4 cm, 1 %.
+    for (const std::uint32_t photons : {100u, 100'000u}) {
+        Registry registry;
+        addDetpResources(registry);
+        addUnitFloor(registry, 4);
+        SceneInfo& info = registry.ctx().emplace<SceneInfo>();
+        info.bounds = Aabb{{0.f, 0.f, 0.f}, {1.f, 0.f, 1.f}};
+        info.maxEdgeLength = 0.02f;
+        DetpSettings settings;
+        settings.photonCount = photons;
+        DetpIrradianceSystem system(settings);
+        ::testing::internal::CaptureStderr();
+        system.build(registry);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_EQ(log.find("the default disc radius") != std::string::npos, photons == 100u) << log;
+    }
+}
+
 TEST(Detp, FlippedNormalsAreNamed) {
     // A floor wound to face up whose normals point down reads dark from above: a warning
     // names it. The same floor with its normals right says nothing.

@@ -396,6 +396,27 @@ struct GltfWriter {
     }
 };
 
+TEST(GltfImport, GeometryDroppedAsDegenerateDoesNotSetTheDefaultEdgeBound) {
+    // A unit triangle, and beside it a zero-area triangle along a 20 km line: dropped, it must
+    // not stretch the scene the default edge bound (and from it the disc radius) scales with.
+    GltfWriter w;
+    const int triangle = w.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+    const int line = w.floats({-1e4f, 0, 0, 0, 0, 0, 1e4f, 0, 0}, "VEC3");
+    w.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", triangle}}}}}}},
+                       {{"primitives", {{{"attributes", {{"POSITION", line}}}}}}}};
+    w.doc["nodes"] = {{{"name", "Triangle"}, {"mesh", 0}}, {{"name", "Line"}, {"mesh", 1}}};
+    w.doc["scenes"] = {{{"nodes", {0, 1}}}};
+    const fs::path path = fs::path(::testing::TempDir()) / "qgi_degenerate_line.gltf";
+    w.write(path);
+    Registry registry;
+    importGltf(registry, path, SceneOptions{});
+    const SceneInfo& info = registry.ctx().get<SceneInfo>();
+    EXPECT_NEAR(info.maxEdgeLength, std::sqrt(2.f) / 50.f, 1e-7f); // the triangle's diagonal
+    EXPECT_EQ(registry.count<Mesh>(), 1u);
+    expectNear(info.bounds.max, {1, 1, 0}, kExact);
+    fs::remove(path);
+}
+
 TEST(GltfImport, AnimationsBecomeScriptedPathsOfMobiles) {
     GltfWriter w;
     const int triangle = w.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");

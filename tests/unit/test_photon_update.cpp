@@ -860,6 +860,30 @@ TEST(PhotonUpdate, APooledMobileParkedFarAwayChangesNothing) {
     EXPECT_TRUE(sameStore(storeOf(*parked), storeOf(*absent)));
 }
 
+TEST(PhotonUpdate, LightsThatLightNothingAreWarnedAbout) {
+    // The room's light as it is (inside the closed room: no warning), moved 1 km away (nearly
+    // every photon leaves the scene at once), and with no power (no photon carries light).
+    enum class Case { Inside, FarAway, Dark };
+    for (const Case c : {Case::Inside, Case::FarAway, Case::Dark}) {
+        Registry registry;
+        const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+        if (c == Case::FarAway)
+            registry.patch<WorldTransform>(room.light).matrix = translation({1000.f, 0.f, 0.f});
+        if (c == Case::Dark) registry.patch<PointLight>(room.light).intensity = 0.f;
+        buildRayScene(registry);
+        PhotonUpdateSystem system(settingsWith(5'000));
+        ::testing::internal::CaptureStderr();
+        firstUpdate(registry, system);
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_EQ(log.find("leave the scene without meeting a surface") != std::string::npos,
+                  c == Case::FarAway)
+            << log;
+        EXPECT_EQ(log.find("every light is off or has no power") != std::string::npos,
+                  c == Case::Dark)
+            << log;
+    }
+}
+
 TEST(PhotonUpdate, IncrementalEqualsFullRecomputeEveryFrame) {
     Registry incremental, baseline;
     const test::Room a = buildRoom(incremental, kCubeRest, kCrateRest);
