@@ -1,5 +1,6 @@
 #pragma once
 
+#include "runtime/ecs/Entity.h"
 #include "tests/reference/IrradianceEstimate.h"
 
 #include <glm/vec3.hpp>
@@ -16,10 +17,11 @@ class RayScene;
 
 namespace qgi::reference {
 
-/// A static mesh vertex in world space, with the irradiance the system under test gave it.
+/// A mesh vertex in world space, with the irradiance the system under test gave it.
 struct VertexSample {
     glm::vec3 position{0.f}, normal{0.f};
     glm::vec3 irradiance{0.f}; ///< VertexIrradiance, W/m^2 (zero when the entity has none)
+    Entity mesh;               ///< the entity whose vertex it is
 };
 
 /// Whether a vertex's disc neighbourhood is an open plane: no surface within 2r along its
@@ -31,6 +33,10 @@ bool openNeighbourhood(const RayScene& scene, const glm::vec3& x, const glm::vec
 /// `count` static vertices with open neighbourhoods at radius r, spread evenly over the list of
 /// all such vertices in entity order (fewer when the scene has fewer).
 std::vector<VertexSample> openStaticVertices(const Registry& registry, const RayScene& scene,
+                                             float r, std::size_t count);
+/// The same over the vertices of mobile meshes, where they stand now, and only where their
+/// surface goes on for 2r all around (not near a block's rim, which static rooms close off).
+std::vector<VertexSample> openMobileVertices(const Registry& registry, const RayScene& scene,
                                              float r, std::size_t count);
 
 /// The Monte Carlo reference at each sample's position and normal, `paths` paths each, without
