@@ -348,6 +348,9 @@ int runDemo(const DemoOptions& options) {
         frameSettings.photons->fullRecompute = options.fullRecompute;
         frameSettings.irradiance.estimator = parseIrradianceEstimator(options.estimator);
         frameSettings.irradiance.discRadius = options.discRadius;
+        if (options.discRadius > 0.f && options.estimator == "impact")
+            logWarning("--disc-radius has no effect with --estimator impact (it counts the "
+                       "photons landing on each vertex's triangles)");
     } else {
         frameSettings.photons.reset();
         if (options.mode == "photon")
