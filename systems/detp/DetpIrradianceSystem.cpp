@@ -253,7 +253,13 @@ void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t first
         discs.collectCrossings(segments, indices.subspan(begin, count), mCrossings,
                                beyond.empty() ? beyond : beyond.subspan(begin, count));
         mStats.crossings += mCrossings.size();
-        for (const DiscCrossing& c : mCrossings) {
+        // A moved mobile's segments lie anywhere in the store: ask for a later crossing's
+        // power ahead of use (this loop is serial, so each miss would be waited out).
+        constexpr std::size_t kAhead = 16;
+        for (std::size_t i = 0; i < mCrossings.size(); ++i) {
+            if (i + kAhead < mCrossings.size())
+                __builtin_prefetch(&segments.power[mCrossings[i + kAhead].segment]);
+            const DiscCrossing& c = mCrossings[i];
             const std::uint32_t v = firstVertex + c.disc;
             mPowerSum[v].add(sign * glm::dvec3(segments.power[c.segment]));
             if (!incremental) continue;
