@@ -213,8 +213,8 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
     // A base path (`extended`) names files BASE.ext: a folder of that name is no obstacle.
     if (base->back() == '/' || (!extended && fs::is_directory(*base, error)))
         fail(option, ": '", *base, "' is a folder; give a file path");
-    const fs::path folder =
-        fs::path(*base).has_parent_path() ? fs::path(*base).parent_path() : fs::path(".");
+    // The folder the write goes to (a link's target's), where its temporary file is made.
+    const fs::path folder = writeTarget(files.front()).parent_path();
     fs::create_directories(folder, error);
     if (error)
         fail(option, ": cannot create the folder '", folder.string(), "': ", error.message());

@@ -3,21 +3,28 @@
 #include "runtime/core/Error.h"
 
 #include <cerrno>
-#include <cstdio>
 #include <cstring>
+#include <random>
 #include <string>
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace qgi {
+namespace {
+
+/// Most symbolic links followed before giving up (the kernel's own limit for a path).
+constexpr int kMaxLinkHops = 40;
+
+} // namespace
 
 std::filesystem::path writeTarget(const std::filesystem::path& path) {
     namespace fs = std::filesystem;
     std::error_code error;
     fs::path target = path;
-    // A loop of links (or a very long chain) stops here; opening it then fails with its own
-    // error.
-    for (int hops = 0; hops < 40 && fs::is_symlink(fs::symlink_status(target, error)); ++hops) {
+    for (int hops = 0; hops < kMaxLinkHops && fs::is_symlink(fs::symlink_status(target, error));
+         ++hops) {
         const fs::path link = fs::read_symlink(target, error);
         if (error) break;
         target = link.is_absolute() ? link : target.parent_path() / link;
@@ -29,29 +36,58 @@ std::filesystem::path writeTarget(const std::filesystem::path& path) {
 void writeFileAtomically(const std::filesystem::path& path, std::string_view bytes,
                          std::string_view what) {
     namespace fs = std::filesystem;
-    const fs::path target = writeTarget(path);
-    std::string name = ".";
-    name += target.filename().string();
-    name += ".qgi-tmp-";
-    name += std::to_string(::getpid());
-    const fs::path temp = target.parent_path() / name;
-    const auto failed = [&](const std::string& why) {
-        std::error_code ignored;
-        fs::remove(temp, ignored);
+    const auto failWith = [&](const std::string& why) {
         fail("cannot write ", what, " '", path.string(), "': ", why);
     };
-    std::FILE* file = std::fopen(temp.c_str(), "wb");
-    if (!file) failed(std::strerror(errno));
-    const bool written = bytes.empty() || std::fwrite(bytes.data(), 1, bytes.size(), file) ==
-                                               bytes.size();
-    const int writeErrno = errno;
-    // fclose flushes what the buffer holds: a full disk may show only there.
-    const bool closed = std::fclose(file) == 0;
-    if (!written) failed(std::strerror(writeErrno));
-    if (!closed) failed(std::strerror(errno));
+    const fs::path target = writeTarget(path);
     std::error_code error;
-    fs::rename(temp, target, error);
-    if (error) failed(error.message());
+    if (fs::is_symlink(fs::symlink_status(target, error)))
+        failWith("too many levels of symbolic links");
+    // The file keeps its permissions when it is replaced; a new one gets rw-r--r--.
+    struct stat existing {};
+    const mode_t mode = ::stat(target.c_str(), &existing) == 0 ? existing.st_mode & 07777 : 0644;
+
+    // A temporary file of a name nobody can guess, created anew (never an existing file or a
+    // link planted under that name), in the target's folder so that the rename is atomic.
+    std::random_device entropy;
+    fs::path temp;
+    int fd = -1;
+    for (int attempt = 0; attempt < 16 && fd < 0; ++attempt) {
+        std::string name = ".";
+        name += target.filename().string();
+        name += ".qgi-tmp-";
+        name += std::to_string(::getpid());
+        name += '-';
+        name += std::to_string(entropy());
+        temp = target.parent_path() / name;
+        fd = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+        if (fd < 0 && errno != EEXIST) failWith(std::strerror(errno));
+    }
+    if (fd < 0) failWith("no free temporary file name beside it");
+    const auto failAndRemove = [&](int code) {
+        ::close(fd);
+        ::unlink(temp.c_str());
+        failWith(std::strerror(code));
+    };
+    for (std::size_t done = 0; done < bytes.size();) {
+        const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) failAndRemove(n < 0 ? errno : EIO);
+        done += std::size_t(n);
+    }
+    // On the disk before it replaces the file: some file systems report a full disk or quota
+    // only here, and a crash after the rename must not leave an empty file.
+    if (::fchmod(fd, mode) != 0 || ::fsync(fd) != 0) failAndRemove(errno);
+    if (::close(fd) != 0) {
+        const int code = errno;
+        ::unlink(temp.c_str());
+        failWith(std::strerror(code));
+    }
+    if (::rename(temp.c_str(), target.c_str()) != 0) {
+        const int code = errno;
+        ::unlink(temp.c_str());
+        failWith(std::strerror(code));
+    }
 }
 
 } // namespace qgi

@@ -28,8 +28,9 @@ struct MeshProcessingOptions {
 /// Throws qgi::Error if a position is NaN or infinite, or an index is out of range.
 Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options);
 
-/// Whether processMesh keeps a triangle of these corners (before welding): area at least
-/// `minArea` and not a sliver (its height at least a millionth of its longest edge).
+/// processMesh's test for a triangle it keeps, on the corners given (it applies it to welded
+/// corners in the mesh's units): area at least `minArea` and not a sliver (its height at
+/// least a millionth of its longest edge).
 bool hasArea(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c, double minArea);
 
 /// Total surface area of a mesh, m^2.

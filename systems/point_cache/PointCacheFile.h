@@ -29,7 +29,8 @@ std::uint64_t pointCacheKey(const Registry& registry, const PointCacheSettings& 
  *  "QGIPCACH", u32 version, u32 0x01020304, u64 key, u64 file size in bytes, u64 points,
  *  u32 lights, then per array for all points: position (3 f32), normal (3 f32), radius f32, dart
  * u32, ao f32, direct (3 f32), visibility (lights f32 per point); then u64 FNV-1a of every byte
- * before it. Written to "<path>.tmp" and renamed, so a crash never leaves half a file under `path`.
+ * before it. Written whole or not at all (writeFileAtomically): a crash or a full disk never
+ * leaves half a file under `path`.
  *  Throws qgi::Error when the file cannot be written.                                     */
 void writePointCacheFile(const std::string& path, std::uint64_t key, const PointCache& cache);
 

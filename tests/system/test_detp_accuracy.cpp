@@ -89,9 +89,10 @@ double relativeQuantileBound(double p, const std::vector<double>& spread) {
 
 /// Checks the irradiance DETP gave `samples` (disc radius r) against the reference, with the
 /// statistics above. Hybrid mode leaves out the first segments of the lights the renderer
-/// draws, and compares with the reference's reflected light only. On a sample of a convex
-/// mobile, segments that leave that mobile are not counted (they cannot cross its own discs
-/// from the front but by rounding; the system skips them too).
+/// draws, and compares with the reference's reflected light only. On a sample of a mobile
+/// (cornell's block, which is convex), segments that leave that mobile are not counted (they
+/// cannot cross a convex mobile's own discs from the front but by rounding; the system skips
+/// them for convex mobiles too).
 void expectSamplesAgreeWithReference(Registry& world, const DetpSettings& detpSettings, float r,
                                      const std::vector<VertexSample>& samples,
                                      std::uint32_t photonCount, const char* label) {

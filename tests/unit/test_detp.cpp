@@ -7,6 +7,7 @@
 #include "components/VertexIrradiance.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
@@ -1438,6 +1439,7 @@ TEST(Detp, ADefaultRadiusWiderThanATenthOfTheSceneIsWarnedAbout) {
         DetpSettings settings;
         settings.photonCount = photons;
         DetpIrradianceSystem system(settings);
+        setLogLevel(LogLevel::Info); // whatever an earlier test left
         ::testing::internal::CaptureStderr();
         system.build(registry);
         const std::string log = ::testing::internal::GetCapturedStderr();

@@ -230,10 +230,26 @@ TEST_F(IoTest, AtomicWriteThroughASymbolicLinkChangesTheFileItNames) {
     writeFileAtomically(link, "through the link", "test file");
     EXPECT_TRUE(fs::is_symlink(link));
     EXPECT_EQ(readAll(target), "through the link");
-    // A loop of links ends the chain; its write fails with an error, not a hang.
+    // A loop of links: the write fails with an error, not a hang, and leaves the links.
     fs::create_symlink("loop_b", mDir / "loop_a");
     fs::create_symlink("loop_a", mDir / "loop_b");
-    (void)writeTarget(mDir / "loop_a");
+    expectErrorNaming([&] { writeFileAtomically(mDir / "loop_a", "x", "test file"); },
+                      mDir / "loop_a");
+    EXPECT_TRUE(fs::is_symlink(mDir / "loop_a"));
+    EXPECT_TRUE(fs::is_symlink(mDir / "loop_b"));
+}
+
+TEST_F(IoTest, AtomicWriteKeepsTheFilesPermissions) {
+    const fs::path file = mDir / "shared.csv";
+    writeFileAtomically(file, "a", "test file");
+    EXPECT_EQ(fs::status(file).permissions(), fs::perms::owner_read | fs::perms::owner_write |
+                                                  fs::perms::group_read | fs::perms::others_read);
+    fs::permissions(file, fs::perms::owner_read | fs::perms::owner_write | fs::perms::group_write |
+                              fs::perms::group_read);
+    writeFileAtomically(file, "b", "test file");
+    EXPECT_EQ(fs::status(file).permissions(), fs::perms::owner_read | fs::perms::owner_write |
+                                                  fs::perms::group_read | fs::perms::group_write);
+    EXPECT_EQ(readAll(file), "b");
 }
 
 TEST_F(IoTest, ReadsOfMissingOrCorruptFilesThrowNamingThePath) {

@@ -872,6 +872,7 @@ TEST(PhotonUpdate, LightsThatLightNothingAreWarnedAbout) {
         if (c == Case::Dark) registry.patch<PointLight>(room.light).intensity = 0.f;
         buildRayScene(registry);
         PhotonUpdateSystem system(settingsWith(5'000));
+        setLogLevel(LogLevel::Info); // whatever an earlier test left
         ::testing::internal::CaptureStderr();
         firstUpdate(registry, system);
         const std::string log = ::testing::internal::GetCapturedStderr();
