@@ -378,6 +378,14 @@ void DiscIndex::makeSieve(float radius, Layout& layout) {
     }
 }
 
+// The sieve's margins and its handling of NaN assume IEEE arithmetic, as compiled without
+// -ffast-math.
+static_assert(std::numeric_limits<float>::is_iec559, "the plane sieve needs IEEE floats");
+#if defined(__FAST_MATH__)
+#error                                                                                             \
+    "DiscIndex's plane sieve must not be compiled with -ffast-math (it needs NaN and exact rounding)"
+#endif
+
 std::uint32_t DiscIndex::PlaneSieve::candidates(const glm::vec3& o, const glm::vec3& d, float start,
                                                 float stop) const {
     // Float rounding of the crossing (t and the point) stays below 2.5e-5 of

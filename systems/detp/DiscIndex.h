@@ -59,9 +59,11 @@ struct PhotonSegments;
  *  Embree's ray starts where the part of the segment that can count enters the box around the
  *  discs (computed in double), so a segment from a distant light is traced at the scene's
  *  scale. What stays is rounding, and the index is exact while it stays inside the margins:
- *   - the rule's own rounding grows with the segment origin's distance: within Embree's 1%
- *     widening of a point disc up to about ten thousand radii from the discs, and within the
- *     quarter radius a plane's lookup has to spare up to over a hundred thousand;
+ *   - the rule's own rounding grows with the segment origin's distance, over |cos| for a
+ *     segment meeting the disc's plane at cosine cos: within Embree's 1% widening of a point
+ *     disc up to about ten thousand radii from the discs, and within the quarter radius a
+ *     plane's lookup has to spare up to over a hundred thousand where |cos| is 0.1 or more
+ *     (a few thousand where a segment skims the plane at |cos| = 0.005);
  *   - rounding Embree's ray origin to float moves a crossing along the ray by about
  *     ulp(coordinates) / |cos| for a segment meeting a plane at cosine cos. At a segment's end
  *     the slack of kEmbreeSlack radii covers it down to |cos| of about 1e-4 at scene

@@ -368,6 +368,7 @@ TEST(DetpDiscIndex, PlanePatchesStayExactForSegmentsFromFarAway) {
     DiscIndex index(device, DiscIndex::Motion::Static);
     index.build(discs.centers, discs.normals, kRadius);
     ASSERT_EQ(index.planarDiscCount(), discs.centers.size());
+    ASSERT_TRUE(index.direct()); // through the plane sieve
     std::vector<DiscCrossing> actual;
     index.collectCrossings(segments, indices, actual);
     const std::vector<DiscCrossing> expected = bruteForce(segments, indices, discs, kRadius);
@@ -494,6 +495,46 @@ TEST(DetpDiscIndex, DirectQueriesOfTiltedPlanesMatchBruteForce) {
     EXPECT_EQ(index.tiltedPlaneCount(), 6u);
     EXPECT_EQ(index.planarDiscCount(), kTiltedPlanarDiscs);
     expectBruteForce(index, discs, tiltedSegments(rng, discs, kRadius), kRadius, rng, 5000);
+}
+
+// What the plane sieve of a direct query works at the edge of: landings on the rims of discs
+// (at the edge of each plane's box for its outermost discs), at |cos| on both sides of the
+// sieve's 0.01 floor and of the tilted planes' grazing limits, from 1 m to 100 m away (float
+// rounding of the crossing grows with the distance), whole and cut.
+TEST(DetpDiscIndex, PlaneSieveKeepsEveryCrossingAtItsMargins) {
+    std::mt19937 rng(41);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    constexpr float kRadius = 0.02f;
+    Discs discs = tiltedDiscs(rng, {0.4f, 0.2f, -0.1f}, turned(0.5f, 0.3f), false);
+    for (int i = 0; i < 15; ++i) // and an exact plane: a floor under the block
+        for (int j = 0; j < 15; ++j) {
+            discs.centers.push_back({-0.2f + 0.05f * float(i), -0.3f, -0.5f + 0.05f * float(j)});
+            discs.normals.push_back({0.f, 1.f, 0.f});
+        }
+    EmbreeDevice device;
+    DiscIndex index(device, DiscIndex::Motion::Static);
+    index.build(discs.centers, discs.normals, kRadius);
+    ASSERT_TRUE(index.direct());
+    ASSERT_EQ(index.planarDiscCount(), discs.centers.size());
+    std::uniform_int_distribution<std::size_t> pick(0, discs.centers.size() - 1);
+    PhotonSegments segments;
+    for (int i = 0; i < 12000; ++i) {
+        const std::size_t j = pick(rng);
+        const glm::vec3 n = discs.normals[j];
+        const glm::vec3 tangent = glm::normalize(glm::cross(n, randomUnit(rng)));
+        const glm::vec3 rim = discs.centers[j] + (kRadius * (0.97f + 0.06f * unit(rng))) * tangent;
+        // |cos| from 0.005 to 0.05, spread evenly in its logarithm.
+        const float cosine = 0.005f * std::pow(10.f, unit(rng));
+        const glm::vec3 across = glm::normalize(glm::cross(n, tangent) * (unit(rng) - 0.5f) +
+                                                tangent * (unit(rng) - 0.5f));
+        const glm::vec3 d = glm::normalize(std::sqrt(1.f - cosine * cosine) * across - cosine * n);
+        // 1 m to 100 m: the rule's own float rounding grows like the distance over |cos|, and
+        // at 1 km it moves these skimming crossings by up to a radius (see DiscIndex).
+        const float distance = std::pow(10.f, 2.f * unit(rng));
+        const float length = distance + kRadius * (0.03f * unit(rng) - 0.01f);
+        addSegment(segments, rim - distance * d, d, i % 3 == 0 ? kInf : length, 1);
+    }
+    expectBruteForce(index, discs, segments, kRadius, rng, 3000);
 }
 
 // With discs that fit no plane the index goes through Embree, and its tilted discs stay points
