@@ -41,10 +41,15 @@ CLI::Validator wholeNumber() {
                 value.erase(sign, (first == std::string::npos ? value.size() - 1 : first) - sign);
                 return {};
             }
+            // strtod also reads hexadecimal ("0x10"), which the help does not offer.
+            if (value.find_first_of("xX") != std::string::npos)
+                return "'" + value + "' is not a whole number (write it in decimal)";
             char* end = nullptr;
+            errno = 0;
             const double v = std::strtod(value.c_str(), &end);
-            if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v) ||
-                v != std::floor(v))
+            const bool whole = !value.empty() && end == value.c_str() + value.size();
+            if (whole && std::isinf(v) && errno == ERANGE) return "'" + value + "' is too large";
+            if (!whole || !std::isfinite(v) || v != std::floor(v))
                 return "'" + value + "' is not a whole number";
             if (!(std::abs(v) < 9e15)) return "'" + value + "' is too large";
             value = std::to_string(static_cast<long long>(v)); // exact below 2^53

@@ -280,9 +280,10 @@ TEST(DemoSmoke, LightingOptionsReachTheExportedIrradiance) {
 }
 
 TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
-    for (const char* args : {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag",
-                             "--photons abc", "--width 1280.5", "--seed -1", "--dt nan",
-                             "--exposure inf", "--vlf-lines 12", "--context sideways"}) {
+    for (const char* args :
+         {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag", "--photons abc",
+          "--width 1280.5", "--seed -1", "--dt nan", "--exposure inf", "--vlf-lines 12",
+          "--context sideways", "--photons 0x10", "--photons 1e1000"}) {
         const RunResult run = runDemo(std::string(args) + " --headless");
         EXPECT_EQ(run.exitCode, 2) << args << ": " << run.output;
         // One line, naming the option.
@@ -291,6 +292,9 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
         EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
         EXPECT_NE(run.output.find(option), std::string::npos) << args << ": " << run.output;
     }
+    // An overflowing number is called too large, not "not a whole number".
+    EXPECT_NE(runDemo("--photons 1e1000 --headless").output.find("'1e1000' is too large"),
+              std::string::npos);
 }
 
 TEST(DemoSmoke, AFileWithNothingToLightIsNamed) {
