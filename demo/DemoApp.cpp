@@ -181,6 +181,16 @@ std::vector<std::filesystem::path> inputFiles(const DemoOptions& options) {
     return inputs;
 }
 
+/// Claims `file` for `option`: no other output of the run may write the same file (through
+/// symbolic links, dangling ones included).
+void claimOutput(const std::filesystem::path& file, const char* option,
+                 std::vector<std::pair<std::filesystem::path, const char*>>& written) {
+    const std::filesystem::path name = writeTarget(file);
+    for (const auto& [other, by] : written)
+        if (name == other) fail(option, ": '", file.string(), "' is written by ", by, " too");
+    written.emplace_back(name, option);
+}
+
 /// Checks an output option before the run: a file path (or, `extended`, a base path that
 /// names the files BASE + each of `extensions`) that can be written, that is no input of the
 /// run, no file another output writes (`written`, which gets this option's files) and no FIFO
@@ -198,11 +208,7 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
     for (const char* extension : extensions)
         files.emplace_back(*base + extension);
     for (const fs::path& file : files) {
-        // The file a write changes: through symbolic links, dangling ones included.
-        const fs::path name = writeTarget(file);
-        for (const auto& [other, by] : written)
-            if (name == other) fail(option, ": '", file.string(), "' is written by ", by, " too");
-        written.emplace_back(name, option);
+        claimOutput(file, option, written);
         if (!fs::exists(file, error)) continue;
         for (const fs::path& input : inputs)
             if (fs::equivalent(file, input, error))
@@ -295,19 +301,13 @@ int runDemo(const DemoOptions& options) {
     const bool pointCacheNamed =
         options.pointCacheFile != "auto" && options.pointCacheFile != "none";
     const bool vlfCacheNamed = options.vlfCache != "auto" && options.vlfCache != "none";
-    const auto cacheIsNoOtherOutput = [&](const std::string& cache, const char* option) {
-        const std::filesystem::path name = writeTarget(cache);
-        for (const auto& [other, by] : written)
-            if (name == other) fail(option, ": '", cache, "' is written by ", by, " too");
-        written.emplace_back(name, option);
-    };
     if (pointCacheNamed) {
-        cacheIsNoOtherOutput(options.pointCacheFile, "--point-cache-file");
+        claimOutput(options.pointCacheFile, "--point-cache-file", written);
         checkCacheTarget(options.pointCacheFile, kPointCacheMagic,
                          "point cache file (--point-cache-file)");
     }
     if (vlfCacheNamed) {
-        cacheIsNoOtherOutput(options.vlfCache, "--vlf-cache");
+        claimOutput(options.vlfCache, "--vlf-cache", written);
         checkCacheTarget(options.vlfCache, vlf::VlfCache::kMagic, "VLF cache file (--vlf-cache)");
     }
 
