@@ -10,6 +10,8 @@
 //    the same frame with fullRecompute (every photon re-shot, every vertex re-estimated).
 //    Counters split the frame into its stages (ms per frame). The argument is the path grid's
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
+//  - MobileUpdatePhotons/cornell/<photons> and FullReshootPhotons/cornell/<photons>: the same
+//    pair at 125k, 250k and 500k photons: the photon count that fits a frame budget.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
 //  - FullShot/<scene>: a frame that shoots every photon, path grid and full estimate included
@@ -83,11 +85,13 @@ struct PhotonWorld {
     std::vector<PhotonHead> heads;
     std::vector<Ray> segmentRays;
 
-    PhotonWorld(const std::string& name, bool fullRecompute, std::uint32_t gridResolution) {
+    /// photons 0: photonsFor(name); gridResolution 0: the default PhotonSettings::gridResolution.
+    PhotonWorld(const std::string& name, bool fullRecompute, std::uint32_t gridResolution,
+                std::uint32_t photons) {
         buildBuiltinScene(registry, name, SceneOptions{});
         registry.ctx().emplace<RayScene>().build(registry);
         PhotonSettings settings;
-        settings.photonCount = photonsFor(name);
+        settings.photonCount = photons > 0 ? photons : photonsFor(name);
         settings.fullRecompute = fullRecompute;
         if (gridResolution > 0) settings.gridResolution = gridResolution;
         // Photon mode on the cornell box: its luminaire, not the punctual stand-in.
@@ -156,17 +160,19 @@ struct PhotonWorld {
     }
 };
 
-/// gridResolution 0: the default PhotonSettings::gridResolution.
+/// The world for these settings (PhotonWorld's zeros are the defaults), shot on first use.
 PhotonWorld& world(const std::string& name, bool fullRecompute = false,
-                   std::uint32_t gridResolution = 0) {
-    static std::map<std::tuple<std::string, bool, std::uint32_t>, std::unique_ptr<PhotonWorld>>
+                   std::uint32_t gridResolution = 0, std::uint32_t photons = 0) {
+    static std::map<std::tuple<std::string, bool, std::uint32_t, std::uint32_t>,
+                    std::unique_ptr<PhotonWorld>>
         worlds;
-    const std::tuple key(name, fullRecompute, gridResolution);
+    const std::tuple key(name, fullRecompute, gridResolution, photons);
     auto it = worlds.find(key);
     if (it == worlds.end()) {
         worlds.clear(); // one world at a time: 4M photons take a few GiB
         it = worlds
-                 .emplace(key, std::make_unique<PhotonWorld>(name, fullRecompute, gridResolution))
+                 .emplace(key, std::make_unique<PhotonWorld>(name, fullRecompute, gridResolution,
+                                                             photons))
                  .first;
     }
     return *it->second;
@@ -506,8 +512,8 @@ void BM_LampRedealt(benchmark::State& state, const std::string& name) {
     reportSweeps(state, on, off);
 }
 
-void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
-    PhotonWorld& w = world(name, fullRecompute, std::uint32_t(state.range(0)));
+/// Frames of the mobiles moving 1 cm each, with each stage's time and counts as counters.
+void moveMobiles(benchmark::State& state, PhotonWorld& w) {
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
            trace = 0, grid = 0, detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0,
            mobileSegments = 0, crossings = 0, deltaSegments = 0;
@@ -543,6 +549,16 @@ void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool full
     state.counters["detp_mobile_segments"] = mobileSegments / frames;
     state.counters["detp_crossings"] = crossings / frames;
     state.counters["detp_delta_segments"] = deltaSegments / frames;
+}
+
+/// Argument: the path grid's resolution (0: the default).
+void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
+    moveMobiles(state, world(name, fullRecompute, std::uint32_t(state.range(0))));
+}
+
+/// Argument: the photon count, the path grid at its default resolution.
+void BM_PhotonBudget(benchmark::State& state, const std::string& name, bool fullRecompute) {
+    moveMobiles(state, world(name, fullRecompute, 0, std::uint32_t(state.range(0))));
 }
 
 } // namespace
@@ -593,6 +609,16 @@ int main(int argc, char** argv) {
             ->Arg(0)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
+        // The frame of MobileUpdate and FullReshoot at fewer photons: what fits a frame budget.
+        if (scene == "cornell")
+            for (const bool full : {false, true})
+                RegisterBenchmark(id(full ? "FullReshootPhotons" : "MobileUpdatePhotons").c_str(),
+                                  BM_PhotonBudget, scene, full)
+                    ->Arg(125'000)
+                    ->Arg(250'000)
+                    ->Arg(500'000)
+                    ->UseRealTime()
+                    ->Unit(benchmark::kMillisecond);
         // The atrium's lamps switched off and on (the cornell box has none that shoot photons:
         // its luminaire is an emissive surface).
         if (scene == "atrium") {
