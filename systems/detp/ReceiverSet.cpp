@@ -15,9 +15,15 @@
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 
+#include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <numeric>
 #include <string>
+#include <vector>
 
 namespace qgi {
 namespace {
@@ -72,16 +78,32 @@ const Mesh& checkedMesh(const Registry& registry, Entity e, bool mobile) {
 /// ReceiverSet::kConvexTolerance of the positions' bounding diagonal.
 bool tangentPlanesSupport(std::span<const glm::vec3> positions,
                           std::span<const glm::vec3> normals) {
-    if (positions.empty() || positions.size() > ReceiverSet::kConvexCheckVertices) return false;
+    if (positions.empty()) return false;
+    // Vertices with the same normal (bit for bit) share one test: every position behind the
+    // plane of the one lowest along it. A box of any refinement has a few distinct normals.
+    using Bits = std::array<std::uint32_t, 3>;
+    const auto bits = [&](std::uint32_t v) { return std::bit_cast<Bits>(normals[v]); };
+    std::vector<std::uint32_t> order(positions.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::sort(order.begin(), order.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return bits(a) < bits(b); });
+    std::vector<std::uint32_t> groupStart;
+    for (std::size_t i = 0; i < order.size(); ++i)
+        if (i == 0 || bits(order[i]) != bits(order[i - 1])) groupStart.push_back(std::uint32_t(i));
+    if (groupStart.size() * positions.size() > ReceiverSet::kConvexCheckPairs) return false;
+    groupStart.push_back(std::uint32_t(order.size()));
+
     Aabb bounds;
     for (const glm::vec3& p : positions)
         bounds.extend(p);
     const float tolerance = ReceiverSet::kConvexTolerance * glm::length(bounds.extent());
     // About the mesh's centre, so a mesh modelled far from its own origin keeps its precision.
     const glm::vec3 centre = bounds.center();
-    for (std::size_t v = 0; v < positions.size(); ++v) {
-        const glm::vec3 n = glm::normalize(normals[v]);
-        const float plane = glm::dot(n, positions[v] - centre) + tolerance;
+    for (std::size_t g = 0; g + 1 < groupStart.size(); ++g) {
+        const glm::vec3 n = glm::normalize(normals[order[groupStart[g]]]);
+        float plane = std::numeric_limits<float>::infinity();
+        for (std::uint32_t i = groupStart[g]; i < groupStart[g + 1]; ++i)
+            plane = std::min(plane, glm::dot(n, positions[order[i]] - centre) + tolerance);
         for (const glm::vec3& p : positions)
             if (glm::dot(n, p - centre) > plane) return false;
     }

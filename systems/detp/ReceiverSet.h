@@ -34,16 +34,18 @@ public:
         /// Mobiles: every vertex's tangent plane has the whole mesh behind it, within
         /// kConvexTolerance (a convex mesh with outward normals). A segment that starts on
         /// such a mesh cannot cross one of its discs from the front. Checked once in object
-        /// space (any invertible pose keeps it); false for meshes over kConvexCheckVertices.
+        /// space (any invertible pose keeps it); false for meshes over kConvexCheckPairs.
         bool convex = false;
     };
 
     /// How far (relative to the mesh's bounding diagonal) a vertex may lie in front of another
     /// vertex's tangent plane in a mesh still called convex: rounding of flat faces.
     static constexpr float kConvexTolerance = 1e-5f;
-    /// The convexity check compares every vertex with every tangent plane; larger mobiles are
-    /// not checked (and not called convex).
-    static constexpr std::uint32_t kConvexCheckVertices = 8192;
+    /// The convexity check compares every vertex with the tangent plane of each distinct
+    /// normal; mobiles whose vertices times distinct normals pass this are not checked (and
+    /// not called convex). A box of any refinement is checked; a smooth mesh, up to 8192
+    /// vertices.
+    static constexpr std::uint64_t kConvexCheckPairs = std::uint64_t(8192) * 8192;
 
     /// Reads StaticMesh/MobileMesh + Mesh + WorldTransform and emplaces (or resizes) a zeroed
     /// VertexIrradiance on each. Throws qgi::Error naming the entity and field for a mesh whose

@@ -1082,6 +1082,31 @@ Mesh cubeOfGrids(float half, int n) {
     return cube;
 }
 
+/// A UV sphere whose normals point out from its centre: smooth, so almost every vertex has a
+/// normal of its own. `n` rings of `2 n` segments.
+Mesh sphereMesh(float radius, int n) {
+    Mesh sphere;
+    for (int ring = 0; ring <= n; ++ring)
+        for (int segment = 0; segment <= 2 * n; ++segment) {
+            const float theta = glm::pi<float>() * float(ring) / float(n);
+            const float phi = glm::pi<float>() * float(segment) / float(n);
+            const glm::vec3 normal(std::sin(theta) * std::cos(phi), std::cos(theta),
+                                   std::sin(theta) * std::sin(phi));
+            sphere.positions.push_back(radius * normal);
+            sphere.normals.push_back(normal);
+        }
+    const auto at = [&](int ring, int segment) {
+        return std::uint32_t(ring * (2 * n + 1) + segment);
+    };
+    for (int ring = 0; ring < n; ++ring)
+        for (int segment = 0; segment < 2 * n; ++segment)
+            for (const std::uint32_t i :
+                 {at(ring, segment), at(ring, segment + 1), at(ring + 1, segment + 1),
+                  at(ring, segment), at(ring + 1, segment + 1), at(ring + 1, segment)})
+                sphere.indices.push_back(i);
+    return sphere;
+}
+
 TEST(Detp, OnlyConvexMobilesAreCalledConvex) {
     Registry registry;
     addDetpResources(registry);
@@ -1101,9 +1126,23 @@ TEST(Detp, OnlyConvexMobilesAreCalledConvex) {
     fold.positions.insert(fold.positions.end(), back.positions.begin(), back.positions.end());
     fold.normals.insert(fold.normals.end(), back.normals.begin(), back.normals.end());
     const Entity inside = addReceiverMesh(registry, std::move(fold), at, true);
-    const int n = 40; // 6 x 41^2 vertices, over the check's limit
-    ASSERT_GT(6u * (n + 1) * (n + 1), ReceiverSet::kConvexCheckVertices);
-    const Entity large = addReceiverMesh(registry, cubeOfGrids(0.2f, n), at, true);
+    // Two floors at different heights: every vertex has the same normal, and the lower floor's
+    // tangent planes have the upper floor in front of them.
+    Mesh steps = gridMesh({0.f, 0.f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 4);
+    const Mesh upper = gridMesh({1.f, 0.1f, 0.f}, {0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}, 4);
+    for (const std::uint32_t i : upper.indices)
+        steps.indices.push_back(std::uint32_t(steps.positions.size()) + i);
+    steps.positions.insert(steps.positions.end(), upper.positions.begin(), upper.positions.end());
+    steps.normals.insert(steps.normals.end(), upper.normals.begin(), upper.normals.end());
+    const Entity stairs = addReceiverMesh(registry, std::move(steps), at, true);
+    // A finely refined box: 6 x 121^2 vertices, but 6 distinct normals to test them against.
+    const Entity fineBox = addReceiverMesh(registry, cubeOfGrids(0.2f, 120), at, true);
+    const Entity ball = addReceiverMesh(registry, sphereMesh(0.2f, 16), at, true);
+    // A smooth mesh whose vertices times distinct normals pass the check's limit.
+    const Mesh fineSphere = sphereMesh(0.2f, 80);
+    ASSERT_GT(std::uint64_t(fineSphere.positions.size()) * (fineSphere.positions.size() / 2),
+              ReceiverSet::kConvexCheckPairs);
+    const Entity large = addReceiverMesh(registry, fineSphere, at, true);
     const Entity ground = addReceiverMesh(registry, cubeOfGrids(0.2f, 4), at, false);
 
     ReceiverSet set;
@@ -1114,6 +1153,9 @@ TEST(Detp, OnlyConvexMobilesAreCalledConvex) {
     EXPECT_TRUE(convex(plate));   // flat: every vertex lies on every tangent plane
     EXPECT_FALSE(convex(room));   // normals pointing in
     EXPECT_FALSE(convex(inside)); // an inside corner: the wall stands in front of the floor
+    EXPECT_FALSE(convex(stairs)); // the upper floor stands in front of the lower one
+    EXPECT_TRUE(convex(fineBox));
+    EXPECT_TRUE(convex(ball));
     EXPECT_FALSE(convex(large));  // not checked
     EXPECT_FALSE(convex(ground)); // static meshes are never skipped over
 }
