@@ -12,6 +12,19 @@ enum class LogLevel { Debug, Info, Warning, Error, Quiet };
 
 void setLogLevel(LogLevel level);
 LogLevel logLevel();
+
+/// Sets the log level for a scope and puts the previous one back when it ends (also when an
+/// exception or a failed test assertion leaves the scope early).
+class ScopedLogLevel {
+public:
+    explicit ScopedLogLevel(LogLevel level) : mPrevious(logLevel()) { setLogLevel(level); }
+    ~ScopedLogLevel() { setLogLevel(mPrevious); }
+    ScopedLogLevel(const ScopedLogLevel&) = delete;
+    ScopedLogLevel& operator=(const ScopedLogLevel&) = delete;
+
+private:
+    LogLevel mPrevious;
+};
 void logMessage(LogLevel level, const std::string& message);
 
 /// `text` safe to print on a terminal: control characters (escape sequences in a hostile

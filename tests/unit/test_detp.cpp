@@ -1481,7 +1481,7 @@ TEST(Detp, ADefaultRadiusWiderThanATenthOfTheSceneIsWarnedAbout) {
         DetpSettings settings;
         settings.photonCount = photons;
         DetpIrradianceSystem system(settings);
-        setLogLevel(LogLevel::Info); // whatever an earlier test left
+        const ScopedLogLevel verbose(LogLevel::Info); // whatever an earlier test left
         ::testing::internal::CaptureStderr();
         system.build(registry);
         const std::string log = ::testing::internal::GetCapturedStderr();

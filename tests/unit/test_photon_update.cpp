@@ -872,7 +872,7 @@ TEST(PhotonUpdate, LightsThatLightNothingAreWarnedAbout) {
         if (c == Case::Dark) registry.patch<PointLight>(room.light).intensity = 0.f;
         buildRayScene(registry);
         PhotonUpdateSystem system(settingsWith(5'000));
-        setLogLevel(LogLevel::Info); // whatever an earlier test left
+        const ScopedLogLevel verbose(LogLevel::Info); // whatever an earlier test left
         ::testing::internal::CaptureStderr();
         firstUpdate(registry, system);
         const std::string log = ::testing::internal::GetCapturedStderr();
@@ -1172,13 +1172,14 @@ TEST(PhotonUpdate, AMobileParkedPastTheRayScenesReachStaysWhereItWas) {
     PhotonUpdateSystem system(settingsWith(20'000));
     firstUpdate(registry, system);
     const PhotonStore before = storeOf(registry);
-    setLogLevel(LogLevel::Quiet);
-    for (const float far : {1e30f, 1e19f, 2e7f}) {
-        test::moveAndUpdate(registry, system, room.crate, translation({far, 0.f, 0.f}), 1);
-        EXPECT_TRUE(deltaOf(registry).empty()) << far;
-        EXPECT_EQ(system.lastFrame().movedMobiles, 0u) << far;
+    {
+        const ScopedLogLevel quiet(LogLevel::Quiet);
+        for (const float far : {1e30f, 1e19f, 2e7f}) {
+            test::moveAndUpdate(registry, system, room.crate, translation({far, 0.f, 0.f}), 1);
+            EXPECT_TRUE(deltaOf(registry).empty()) << far;
+            EXPECT_EQ(system.lastFrame().movedMobiles, 0u) << far;
+        }
     }
-    setLogLevel(LogLevel::Info);
     EXPECT_TRUE(sameStore(before, storeOf(registry)));
 }
 
@@ -1332,11 +1333,12 @@ TEST(PhotonUpdate, AnEmissiveSurfaceThatCannotEmitGoesDarkWithoutAFullShot) {
     const PhotonLight crate = storeOf(registry).lights[1];
     ASSERT_GT(crate.photonCount, 0u);
 
-    setLogLevel(LogLevel::Quiet); // the warning that the surface cannot emit
-    registry.patch<Material>(room.crate).emission = glm::vec3(-1.f);
-    system.update(registry, FrameContext{1, 0.0, 0.f, 0});
-    registry.clearChanges();
-    setLogLevel(LogLevel::Info);
+    {
+        const ScopedLogLevel quiet(LogLevel::Quiet); // the warning that the surface cannot emit
+        registry.patch<Material>(room.crate).emission = glm::vec3(-1.f);
+        system.update(registry, FrameContext{1, 0.0, 0.f, 0});
+        registry.clearChanges();
+    }
     EXPECT_FALSE(deltaOf(registry).full);
     EXPECT_EQ(deltaOf(registry).paths.size(), crate.photonCount);
     const PhotonStore& store = storeOf(registry);
@@ -1974,7 +1976,8 @@ void runRandomLightChanges(std::uint32_t photons, std::uint32_t budget, std::uin
 }
 
 TEST(PhotonUpdate, RandomLightChangesKeepEveryPhotonRangeAndEstimateConsistent) {
-    setLogLevel(LogLevel::Quiet); // lights that cannot emit are named on every change
+    const ScopedLogLevel quiet(
+        LogLevel::Quiet); // lights that cannot emit are named on every change
     for (std::uint32_t seed = 1; seed <= 2; ++seed)
         for (const std::uint32_t photons : {300u, 1'200u, 4'000u})
             for (const bool hybrid : {true, false}) {
@@ -1984,16 +1987,16 @@ TEST(PhotonUpdate, RandomLightChangesKeepEveryPhotonRangeAndEstimateConsistent) 
                 runRandomLightChanges(photons, photons / 9 + 1, seed * 7919 + photons, 250, hybrid);
                 if (HasFatalFailure()) break;
             }
-    setLogLevel(LogLevel::Info);
 }
 
 TEST(PhotonUpdate, RandomLightChangesGiveTheSameStoreOnOneThreadAsOnMany) {
-    setLogLevel(LogLevel::Quiet);
     std::vector<std::uint64_t> many, one;
-    runRandomLightChanges(1'200, 150, 77, 150, true, &many);
-    tbb::task_arena single(1);
-    single.execute([&] { runRandomLightChanges(1'200, 150, 77, 150, true, &one); });
-    setLogLevel(LogLevel::Info);
+    {
+        const ScopedLogLevel quiet(LogLevel::Quiet);
+        runRandomLightChanges(1'200, 150, 77, 150, true, &many);
+        tbb::task_arena single(1);
+        single.execute([&] { runRandomLightChanges(1'200, 150, 77, 150, true, &one); });
+    }
     EXPECT_EQ(many, one);
     EXPECT_EQ(many.size(), 150u);
 }

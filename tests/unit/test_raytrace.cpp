@@ -491,16 +491,19 @@ TEST(RayScene, SetMobilePoseMovesOneMobileAndRejectsBadPoses) {
     EXPECT_EQ(scene.intersect(down)->entity, wall);
 
     const float nan = std::numeric_limits<float>::quiet_NaN();
-    setLogLevel(LogLevel::Quiet);
-    EXPECT_FALSE(scene.setMobilePose(crate, translation(nan, 0, 0)));
-    EXPECT_FALSE(scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(1, 0, 1))));
-    // Parked far away: past kMaxPoseReach (Embree itself aborts on ray origins past ~1.8e18).
-    EXPECT_FALSE(scene.setMobilePose(crate, translation(1e30f, 0, 0)));
-    EXPECT_FALSE(scene.setMobilePose(crate, translation(0, 0, 2 * kMaxPoseReach)));
-    EXPECT_FALSE(scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(2 * kMaxPoseReach))));
-    EXPECT_TRUE(scene.setMobilePose(crate, translation(0, -0.5f * kMaxPoseReach, 0))); // far, fine
-    EXPECT_TRUE(scene.setMobilePose(crate, translation(5, 0, 2)));
-    setLogLevel(LogLevel::Info);
+    {
+        const ScopedLogLevel quiet(LogLevel::Quiet);
+        EXPECT_FALSE(scene.setMobilePose(crate, translation(nan, 0, 0)));
+        EXPECT_FALSE(scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(1, 0, 1))));
+        // Parked far away: past kMaxPoseReach (Embree itself aborts on ray origins past ~1.8e18).
+        EXPECT_FALSE(scene.setMobilePose(crate, translation(1e30f, 0, 0)));
+        EXPECT_FALSE(scene.setMobilePose(crate, translation(0, 0, 2 * kMaxPoseReach)));
+        EXPECT_FALSE(
+            scene.setMobilePose(crate, glm::scale(kIdentity, glm::vec3(2 * kMaxPoseReach))));
+        EXPECT_TRUE(
+            scene.setMobilePose(crate, translation(0, -0.5f * kMaxPoseReach, 0))); // far, fine
+        EXPECT_TRUE(scene.setMobilePose(crate, translation(5, 0, 2)));
+    }
     EXPECT_FALSE(scene.setMobilePose(wall, kIdentity)); // not a mobile
     EXPECT_EQ(scene.mobilePose(crate), translation(5, 0, 2));
     EXPECT_EQ(scene.intersect(down)->entity, wall);
@@ -737,11 +740,12 @@ TEST(EmbreeDevice, ErrorCallbackRecordsErrorsWithoutCrashing) {
     EXPECT_FALSE(device.takeError());
     SceneHandle scene(rtcNewScene(device.handle()));
     GeometryHandle geometry(rtcNewGeometry(device.handle(), RTC_GEOMETRY_TYPE_TRIANGLE));
-    setLogLevel(LogLevel::Quiet);
-    rtcAttachGeometryByID(scene.get(), geometry.get(), 3);
-    rtcAttachGeometryByID(scene.get(), geometry.get(), 3);         // the ID is taken
-    rtcSetSceneBuildQuality(scene.get(), RTC_BUILD_QUALITY_REFIT); // geometries only
-    setLogLevel(LogLevel::Info);
+    {
+        const ScopedLogLevel quiet(LogLevel::Quiet);
+        rtcAttachGeometryByID(scene.get(), geometry.get(), 3);
+        rtcAttachGeometryByID(scene.get(), geometry.get(), 3);         // the ID is taken
+        rtcSetSceneBuildQuality(scene.get(), RTC_BUILD_QUALITY_REFIT); // geometries only
+    }
     EXPECT_EQ(device.errorCount(), 2u);
     const std::optional<EmbreeError> error = device.takeError();
     ASSERT_TRUE(error);
