@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,26 @@ CLI::Validator finiteNumber() {
         "");
 }
 
+/// CLI::Range with its bounds written as the help writes them (CLI11's own message gives
+/// floats six decimals: "0.000000 to 100.000000"). Runs after wholeNumber or finiteNumber.
+template <typename T> CLI::Validator within(T min, T max) {
+    std::ostringstream bounds;
+    bounds << min << " to " << max;
+    std::ostringstream help;
+    help << "in [" << min << " - " << max << "]";
+    return CLI::Validator(
+        [min, max, bounds = bounds.str()](std::string& value) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(value.c_str(), &end);
+            if (value.empty() || end != value.c_str() + value.size())
+                return "'" + value + "' is not a number";
+            if (!(v >= double(min) && v <= double(max)))
+                return value + " is not in the range " + bounds;
+            return {};
+        },
+        help.str());
+}
+
 } // namespace
 
 ParseResult parseDemoOptions(int argc, char** argv) {
@@ -102,13 +123,13 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--frames", o.frames,
                    "Frames to run; 0 runs until the window closes (headless: 240)")
         ->transform(wholeNumber())
-        ->check(CLI::Range(0, 10'000'000));
+        ->check(within(0, 10'000'000));
     app.add_option("--width", o.width, "Framebuffer width in pixels")
         ->transform(wholeNumber())
-        ->check(CLI::Range(16, 8192));
+        ->check(within(16, 8192));
     app.add_option("--height", o.height, "Framebuffer height in pixels")
         ->transform(wholeNumber())
-        ->check(CLI::Range(16, 8192));
+        ->check(within(16, 8192));
     app.add_option("--camera-path", o.cameraPath,
                    "'scene' (the scene's own path), 'none' (stay at the start), or a CSV file with "
                    "rows time,x,y,z,yaw_deg,pitch_deg");
@@ -119,7 +140,7 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "Photon paths in the stored ray set (0: no global illumination); with their "
                    "path grid about 400 bytes each on the Cornell box, 170 on the atrium")
         ->transform(wholeNumber())
-        ->check(CLI::Range(0u, std::uint32_t(maxPhotonCount(PhotonSettings{}.maxBounces))));
+        ->check(within(0u, std::uint32_t(maxPhotonCount(PhotonSettings{}.maxBounces))));
     app.add_option("--estimator", o.estimator,
                    "Per-vertex irradiance estimator: detp (density estimation on the tangent "
                    "plane), impact (impact count) or photonmap (k-nearest photon map)")
@@ -128,21 +149,21 @@ ParseResult parseDemoOptions(int argc, char** argv) {
                    "DETP disc radius in metres (0: the scene default, half its mesh edge bound, "
                    "widened where photons are scarce for the scene's area)")
         ->transform(finiteNumber())
-        ->check(CLI::Range(0.f, 100.f));
+        ->check(within(0.f, 100.f));
     app.add_flag("--full-recompute", o.fullRecompute,
                  "Re-shoot every photon and re-estimate every vertex each frame (the baseline "
                  "the incremental update is measured against)");
     app.add_option("--exposure", o.exposure,
                    "Multiplier on HDR radiance before the tonemap (0: the scene's suggestion)")
         ->transform(finiteNumber())
-        ->check(CLI::Range(0.f, 1e6f));
+        ->check(within(0.f, 1e6f));
     app.add_option("--max-edge", o.maxEdgeLength,
                    "Mesh refinement bound in metres (0: the scene's default)")
         ->transform(finiteNumber())
-        ->check(CLI::Range(0.f, 1000.f));
+        ->check(within(0.f, 1000.f));
     app.add_option("--dt", o.dt, "Seconds per frame in headless runs")
         ->transform(finiteNumber())
-        ->check(CLI::Range(1e-4, 1.0));
+        ->check(within(1e-4, 1.0));
     app.add_option("--seed", o.seed, "Seed for every random choice")
         ->transform(wholeNumber())
         ->check([](const std::string& value) {
@@ -187,10 +208,10 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--vlf-level", o.vlfLevel,
                    "VLF direction level: 2*4^L+1 directions (3: 129, 4: 513)")
         ->transform(wholeNumber())
-        ->check(CLI::Range(1, 6));
+        ->check(within(1, 6));
     app.add_option("--vlf-lines", o.vlfLines, "VLF lines per subfield side (a multiple of 8)")
         ->transform(wholeNumber())
-        ->check(CLI::Range(8, 1024))
+        ->check(within(8, 1024))
         ->check([](const std::string& value) {
             return std::stoi(value) % 8 == 0 ? std::string{} : value + " is not a multiple of 8";
         });

@@ -73,6 +73,9 @@ std::string oneLine(std::string text) {
 
 std::vector<unsigned char> GltfReader::readFile() const {
     std::error_code error;
+    // A pipe, a device or a folder: "not supported" from file_size would not say why.
+    if (fs::exists(mPath, error) && !fs::is_regular_file(mPath, error))
+        fail("", "'", mPath.string(), "' is not a regular file");
     const std::uintmax_t size = fs::file_size(mPath, error);
     if (error) fail("", "cannot read '", mPath.string(), "': ", error.message());
     if (size == 0) fail("", "file is empty");

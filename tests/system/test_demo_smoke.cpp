@@ -295,6 +295,10 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
     // An overflowing number is called too large, not "not a whole number".
     EXPECT_NE(runDemo("--photons 1e1000 --headless").output.find("'1e1000' is too large"),
               std::string::npos);
+    // A value out of range is told the range as the help writes it.
+    EXPECT_NE(runDemo("--disc-radius 500 --headless")
+                  .output.find("--disc-radius: 500 is not in the range 0 to 100 (see --help)"),
+              std::string::npos);
 }
 
 TEST(DemoSmoke, AFileWithNothingToLightIsNamed) {

@@ -12,6 +12,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -221,6 +223,20 @@ TEST(GltfBadInput, MissingFileAndUnknownExtensionNameThePath) {
     EXPECT_EQ(
         importFailure(kData / "good" / "triangle.bin").rfind("triangle.bin: unknown extension", 0),
         0u);
+}
+
+TEST(GltfBadInput, APipeOrAFolderIsNoSceneFile) {
+    const fs::path pipe = scratchFile("pipe.gltf"), folder = scratchFile("folder.glb");
+    fs::remove(pipe);
+    fs::create_directories(folder);
+    ASSERT_EQ(mkfifo(pipe.c_str(), 0600), 0);
+    EXPECT_THAT(importFailure(pipe), ::testing::HasSubstr("pipe.gltf' is not a regular file"));
+    EXPECT_THAT(importFailure(folder), ::testing::HasSubstr("folder.glb' is not a regular file"));
+    // Through a link, too (a level that links its scene to /dev/zero).
+    const fs::path link = scratchFile("zero.gltf");
+    fs::remove(link);
+    fs::create_symlink("/dev/zero", link);
+    EXPECT_THAT(importFailure(link), ::testing::HasSubstr("zero.gltf' is not a regular file"));
 }
 
 TEST(GltfBadInput, APlusInAFileNameIsExplained) {
