@@ -10,6 +10,7 @@
 #include "components/LightStandIn.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
+#include "components/PointLight.h"
 #include "components/ShLighting.h"
 #include "components/SpotLight.h"
 #include "components/VertexIrradiance.h"
@@ -444,6 +445,60 @@ TEST(ShProbes, PhotonModeCarriesTheSunAtTheProbe) {
     const float bound = 50.f * float(4e-6 + 64.0 * 0x1p-24);
     EXPECT_NEAR(scene.irradiance({0.f, 1.f, 0.f}).x, 50.f * 17.f / 16.f, bound);
     EXPECT_NEAR(scene.irradiance({1.f, 0.f, 0.f}).x, 50.f * (0.25f - 5.f / 32.f), bound);
+}
+
+TEST(ShProbes, HybridModeWeighsASlantedSunByItsCosine) {
+    // One sun at 60 degrees from the vertical, 50 W/m^2 across its beam: the floor receives
+    // 50 cos 60 = 25 W/m^2, so its radiance is albedo / pi x 25 (a missing cosine gives 50).
+    const float albedo = 0.5f;
+    FloorScene scene(floorSettings(true), grey(albedo));
+    const Entity sun = scene.world.create();
+    const glm::vec3 travel(std::sin(glm::radians(60.f)), -std::cos(glm::radians(60.f)), 0.f);
+    scene.world.emplace<WorldTransform>(
+        sun, glm::inverse(glm::lookAtRH(glm::vec3(0.f), travel, glm::vec3(1.f, 0.f, 0.f))));
+    scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
+    scene.expectUniformFloor(glm::dvec3(double(albedo) / kPi * 50.0 * 0.5));
+}
+
+TEST(ShProbes, PhotonModeCarriesPointAndSpotLightsAtTheProbe) {
+    // Photon mode, a floor that reflects nothing: a probe holds a point or spot light 0.4 m
+    // straight above it as a directional source of irradiance I f / d^2 (f: the spot's
+    // falloff toward the probe, 1 for a point light), whose order-2 irradiance is 17/16 of it
+    // facing the light and 1/4 - 5/32 of it at grazing incidence (as for the sun above).
+    constexpr float kIntensity = 8.f, kHeight = 0.4f;
+    const float inner = glm::radians(10.f), outer = glm::radians(40.f), tilt = glm::radians(25.f);
+    // glTF's falloff, written out here: ((cos a - cos outer) / (cos inner - cos outer))^2.
+    const float falloff = float(std::pow((std::cos(double(tilt)) - std::cos(double(outer))) /
+                                             (std::cos(double(inner)) - std::cos(double(outer))),
+                                         2.0));
+    for (const bool spot : {false, true}) {
+        SCOPED_TRACE(spot ? "spot light" : "point light");
+        FloorScene scene(floorSettings(false), grey(0.5f));
+        scene.run(); // where the probes are
+        const ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
+        const std::uint32_t probe = volume.probeCount() - 1;
+        const glm::vec3 at = volume.grid().position(probe);
+        const glm::vec3 light = at + glm::vec3(0.f, kHeight, 0.f);
+        const Entity e = scene.world.create();
+        if (spot) {
+            // Its axis turned 25 degrees off the probe, between the cones.
+            const glm::vec3 axis(std::sin(tilt), -std::cos(tilt), 0.f);
+            scene.world.emplace<WorldTransform>(
+                e, glm::inverse(glm::lookAtRH(light, light + axis, glm::vec3(0.f, 0.f, 1.f))));
+            scene.world.emplace<SpotLight>(e, SpotLight{glm::vec3(1.f), kIntensity, inner, outer});
+        } else {
+            scene.world.emplace<WorldTransform>(e, glm::translate(glm::mat4(1.f), light));
+            scene.world.emplace<PointLight>(e, PointLight{glm::vec3(1.f), kIntensity});
+        }
+        scene.run();
+        const double e0 = kIntensity * (spot ? falloff : 1.f) / (kHeight * kHeight);
+        // The sun test's bound (six-digit constants, a few dozen float operations), with a
+        // few more operations for the distance and the falloff.
+        const double bound = e0 * (4e-6 + 96.0 * kU);
+        const sh::ShRgb& L = volume.coefficients(probe);
+        EXPECT_NEAR(sh::irradiance(L, {0.f, 1.f, 0.f}).x, e0 * 17.0 / 16.0, bound);
+        EXPECT_NEAR(sh::irradiance(L, {0.f, 0.f, 1.f}).x, e0 * (0.25 - 5.0 / 32.0), bound);
+    }
 }
 
 TEST(ShProbes, ConstantEnvironmentGivesPiL) {
