@@ -219,6 +219,38 @@ TEST(PointSetBuild, DensityIsHigherAtTheCreaseThanOnTheOpenFloor) {
     EXPECT_LT(creaseRadius / creaseCount, openRadius / openCount);
 }
 
+TEST(PointSetBuild, AmbientOcclusionBesideAWallMatchesItsClosedForm) {
+    // A floor point a distance s from a wall that stands far above and beside it, AO distance
+    // D. Cosine-weighted directions project uniformly onto the unit disc of the floor
+    // (Malley's method), and a direction meets the wall within D when its horizontal
+    // component toward the wall is at least a = s / D: the disc's segment beyond the chord
+    // at a, AO = (acos a - a sqrt(1 - a^2)) / pi. Uniform directions, or no distance limit
+    // (AO 1/2 everywhere), would fail.
+    Registry registry;
+    addMesh(registry, test::gridMesh({-10.f, 0.f, 10.f}, {20.f, 0.f, 0.f}, {0.f, 0.f, -20.f}, 1),
+            glm::mat4(1.f), grey(0.5f), false, "floor");
+    // The wall x = 0, 10 m high and 20 m wide: every ray that reaches x = 0 within D = 1 m
+    // meets it.
+    addMesh(registry, test::gridMesh({0.f, 0.f, 10.f}, {0.f, 10.f, 0.f}, {0.f, 0.f, -20.f}, 1),
+            glm::mat4(1.f), grey(0.5f), false, "wall");
+    test::buildRayScene(registry);
+    const RayScene& scene = registry.ctx().get<RayScene>();
+    constexpr float kDistance = 1.f;
+    constexpr std::uint32_t kRays = 256, kKeys = 256;
+    for (const double a : {0.05, 0.25, 0.5, 0.8}) {
+        const double expected = (std::acos(a) - a * std::sqrt(1.0 - a * a)) / std::acos(-1.0);
+        double sum = 0.0;
+        for (std::uint32_t key = 0; key < kKeys; ++key)
+            sum += ambientOcclusion(scene, {-float(a) * kDistance, 0.f, 0.f}, {0.f, 1.f, 0.f},
+                                    kRays, kDistance, 7, key);
+        // Every ray is an independent Bernoulli trial (its own hashed numbers): 5 standard
+        // errors of the binomial proportion, a one-in-a-million miss.
+        const double n = double(kRays) * kKeys;
+        EXPECT_NEAR(sum / kKeys, expected, 5.0 * std::sqrt(expected * (1.0 - expected) / n))
+            << "s / D = " << a;
+    }
+}
+
 TEST(PointSetBuild, NoPointsWhereLightCannotReach) {
     Registry registry;
     // A lit room; inside it a hollow closed box (faces inward and outward alike: rays hit both
