@@ -695,6 +695,73 @@ TEST(VlfBake, PointLightDirectPass) {
         }
 }
 
+TEST(VlfBake, GlossyDirectPassIsThePhongLobeOfAPointLight) {
+    // A point light over a lone glossy floor (k_s 0.6, n_s 20): after the direct pass every
+    // glossy cell holds, for its outgoing direction o at its point x on the floor, the
+    // modified Phong lobe k_s (n + 2) / (2 pi) cos^n(a) times the irradiance I cos(theta) / r^2,
+    // a the angle between o and the light's mirror direction. Nothing else lights the floor
+    // (one face, black sky), so that is all a cell holds.
+    test::VlfSceneBuilder b;
+    const float ks = 0.6f, ns = 20.f;
+    const std::uint32_t glossy = b.material(glm::vec3(0.3f), glm::vec3(0.f), glm::vec3(ks), ns);
+    b.quad({-1.f, 0.f, -1.f}, {-1.f, 0.f, 1.f}, {1.f, 0.f, 1.f}, {1.f, 0.f, -1.f}, glossy);
+    PunctualLight light;
+    light.position = {0.2f, 0.8f, -0.1f};
+    light.intensity = glm::vec3(3.f);
+    b.lights.push_back(light);
+    const auto scene = b.build();
+    VlfSettings s;
+    s.directionLevel = 2;
+    s.linesPerSide = 32;
+    s.tileSize = 8;
+    s.iterations = 1;
+    const Vlf v = bakeVlf(*scene, s);
+    ASSERT_EQ(v.specularFaceCount(), 1u);
+    const Face& f = v.faces()[v.specularFace(0)];
+    int checked = 0, lit = 0, wrong = 0;
+    double peak = 0.0;
+    for (std::size_t psf = 0; psf < v.directions().size(); ++psf) {
+        const TileBlock& bl = v.block(0, psf);
+        if (bl.side == 0) continue;
+        const glm::vec3 line = v.directions().direction(psf);
+        const glm::dvec3 o = glm::dvec3(float(bl.side) * line);
+        for (int j = 0; j < s.linesPerSide; ++j)
+            for (int i = 0; i < s.linesPerSide; ++i) {
+                const std::int64_t c = v.cellIndex(0, psf, i, j);
+                if (c < 0 || v.tiles()[std::size_t(c)].w <= 0.f) continue;
+                // The cell's point: its line's centre met with the floor's plane.
+                const glm::vec3 p = cellCentreLine(v, psf, i, j);
+                const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, line);
+                const glm::dvec3 x = glm::dvec3(p + t * line);
+                // In double, from the definitions.
+                const glm::dvec3 toLight = glm::dvec3(light.position) - x;
+                const double r = glm::length(toLight);
+                const glm::dvec3 from = toLight / r;
+                const glm::dvec3 n(0.0, 1.0, 0.0);
+                const glm::dvec3 mirror = 2.0 * glm::dot(n, from) * n - from;
+                const double cosA = glm::dot(mirror, o);
+                const double E = 3.0 * glm::dot(n, from) / (r * r);
+                const double expected =
+                    cosA > 0.0 ? ks * (ns + 2.0) / (2.0 * std::acos(-1.0)) * std::pow(cosA, ns) * E
+                               : 0.0;
+                // Float rounding: the cell's point and directions within a few 1e-7 m and
+                // radians, which n_s = 20 multiplies in cos^n (20 x 1e-6 / cos a), and some
+                // twenty float operations.
+                const double got = v.tiles()[std::size_t(c)].x;
+                if (!(std::abs(got - expected) <= 5e-5 * expected + 1e-7) && ++wrong <= 5)
+                    ADD_FAILURE() << "subfield " << psf << ", cell " << i << "," << j << ": " << got
+                                  << " against " << expected;
+                ++checked;
+                lit += expected > 1e-3;
+                peak = std::max(peak, expected);
+            }
+    }
+    EXPECT_EQ(wrong, 0) << "of " << checked << " cells";
+    EXPECT_GT(checked, 1000);
+    EXPECT_GT(lit, 50);   // the lobe is seen, not just its dark tail
+    EXPECT_GT(peak, 1.0); // and its peak: (22 / 2 pi) 0.6 x 3 x 0.8 / 0.69 ~ 7 W/(m^2 sr)
+}
+
 TEST(VlfBake, SpotAndDirectionalLightsDirectPass) {
     // Over a floor: a spot light pointing down, whose cones put the floor's texels inside,
     // between and outside them, and a tilted sun half hidden by a square roof. The direct pass
