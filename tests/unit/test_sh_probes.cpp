@@ -960,6 +960,24 @@ bool segmentCrossesBox(const glm::vec3& a, const glm::vec3& b, const Aabb& box) 
     return false;
 }
 
+/// Whether segment ab meets the box, by the slab method in double: exact up to the double
+/// rounding, where segmentCrossesBox above is generous by a centimetre.
+bool segmentMeetsBoxExactly(const glm::vec3& a, const glm::vec3& b, const Aabb& box) {
+    double enter = 0.0, leave = 1.0;
+    for (int axis = 0; axis < 3; ++axis) {
+        const double from = a[axis], span = double(b[axis]) - from;
+        const double lo = box.min[axis], hi = box.max[axis];
+        if (span == 0.0) {
+            if (from < lo || from > hi) return false;
+            continue;
+        }
+        const double t0 = (lo - from) / span, t1 = (hi - from) / span;
+        enter = std::max(enter, std::min(t0, t1));
+        leave = std::min(leave, std::max(t0, t1));
+    }
+    return enter <= leave;
+}
+
 TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
     MobileRoom room(100000);
     const auto before = room.probes();
@@ -976,13 +994,29 @@ TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
     const float reach = std::max(room.system.influenceDistance(),
                                  rho / (2.f * std::sqrt(ShProbeSettings{}.mobileSolidAngleShare)));
     const glm::vec3 light(0.f, 1.8f, 0.f);
-    std::size_t changed = 0, inRegion = 0;
+    // And every probe well inside the region was refreshed (the check above bounds the
+    // region from outside; this one from inside: a shorter reach, or a lost shadow test,
+    // would leave probes stale that a fresh projection changes). Shadow segments that only
+    // graze a box (within 1 mm) count either way.
+    const std::span<const std::uint32_t> refreshedList = room.system.lastRefreshed();
+    std::vector<char> refreshed(before.size(), 0);
+    for (const std::uint32_t p : refreshedList)
+        refreshed[p] = 1;
+    std::size_t changed = 0, inRegion = 0, mustRefresh = 0;
     for (std::uint32_t p = 0; p < before.size(); ++p) {
         const glm::vec3 x = grid.position(p);
-        bool region = false;
+        bool region = false, inside = false;
         for (const Aabb& box : {boxAt(from), boxAt(to)}) {
             const glm::vec3 d = x - glm::clamp(x, box.min, box.max);
             region = region || glm::length(d) <= reach + 1e-4f || segmentCrossesBox(x, light, box);
+            const Aabb shrunk{box.min + 1e-3f, box.max - 1e-3f};
+            inside = inside || glm::length(d) <= reach - 1e-4f ||
+                     segmentMeetsBoxExactly(x, light, shrunk);
+        }
+        if (inside) {
+            ++mustRefresh;
+            EXPECT_TRUE(refreshed[p]) << "probe " << p << " at " << x.x << "," << x.y << "," << x.z
+                                      << " in the influence region was not refreshed";
         }
         inRegion += region;
         if (!sameSh(before[p], after[p])) {
@@ -992,6 +1026,7 @@ TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
         }
     }
     EXPECT_GT(changed, 10u);
+    EXPECT_GT(mustRefresh, changed / 2);
     EXPECT_LT(inRegion, before.size() / 2); // the region is a part of the volume, not all of it
 
     // The refreshed probes equal a fresh projection of the whole volume at the new pose.
@@ -1001,6 +1036,45 @@ TEST(ShProbes, AfterAMobileMovesOnlyProbesInItsInfluenceRegionChange) {
         if (!sameSh(before[p], after[p])) {
             EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
         }
+}
+
+TEST(ShProbes, AMobileUnderTheLightRefreshesTheProbesInItsShadowFarBeyondItsReach) {
+    // The cube lifted to just under the lamp: its shadow spreads over the floor, far past its
+    // reach, and every probe there loses (or, at the old pose, regains) its direct light.
+    MobileRoom room(100000);
+    const auto before = room.probes();
+    const glm::vec3 to(0.05f, 1.45f, 0.f);
+    room.moveCube(to, 1);
+    EXPECT_EQ(room.system.staleCount(), 0u);
+    const auto after = room.probes();
+    std::vector<char> refreshed(before.size(), 0);
+    for (const std::uint32_t p : room.system.lastRefreshed())
+        refreshed[p] = 1;
+    const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
+    const Aabb shrunk{to - 0.199f, to + 0.199f}; // segments that graze it count either way
+    const float rho = 0.5f * glm::length(glm::vec3(0.4f));
+    const float reach = std::max(room.system.influenceDistance(),
+                                 rho / (2.f * std::sqrt(ShProbeSettings{}.mobileSolidAngleShare)));
+    const glm::vec3 light(0.f, 1.8f, 0.f);
+    std::size_t shadowOnly = 0, changedThere = 0;
+    for (std::uint32_t p = 0; p < before.size(); ++p) {
+        const glm::vec3 x = grid.position(p);
+        const glm::vec3 d = x - glm::clamp(x, to - 0.2f, to + 0.2f);
+        if (glm::length(d) <= reach + 0.01f || !segmentMeetsBoxExactly(x, light, shrunk)) continue;
+        ++shadowOnly;
+        changedThere += !sameSh(before[p], after[p]);
+        EXPECT_TRUE(refreshed[p]) << "probe " << p << " at " << x.x << "," << x.y << "," << x.z
+                                  << " in the cube's shadow was not refreshed";
+    }
+    EXPECT_GT(shadowOnly, 5u);
+    EXPECT_GT(changedThere, shadowOnly / 2); // its light did change
+    // Each refreshed probe equals a fresh projection at the new pose. (Probes past the reach
+    // that only see the cube, under the share of their directions the rule allows, are left
+    // as they were by design.)
+    room.system.projectAll(room.world);
+    const auto fresh = room.probes();
+    for (std::uint32_t p = 0; p < before.size(); ++p)
+        if (refreshed[p]) EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
 }
 
 TEST(ShProbes, AMobileTakenOutAndPutBackRefreshesItsRegion) {
