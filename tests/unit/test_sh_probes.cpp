@@ -25,12 +25,14 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <random>
 #include <sstream>
 #include <vector>
 
@@ -476,7 +478,7 @@ TEST(ShProbes, PhotonModeCarriesPointAndSpotLightsAtTheProbe) {
         FloorScene scene(floorSettings(false), grey(0.5f));
         scene.run(); // where the probes are
         const ProbeVolume& volume = scene.world.ctx().get<ProbeVolume>();
-        const std::uint32_t probe = volume.probeCount() - 1;
+        const auto probe = std::uint32_t(volume.probeCount() - 1);
         const glm::vec3 at = volume.grid().position(probe);
         const glm::vec3 light = at + glm::vec3(0.f, kHeight, 0.f);
         const Entity e = scene.world.create();
@@ -824,6 +826,75 @@ TEST(ShProbes, AnAvatarOutsideTheVolumeIsNamedOnce) {
     EXPECT_TRUE(rooms.world.has<ShLighting>(inside) && rooms.world.has<ShLighting>(edge));
 }
 
+TEST(ShProbes, InterpolationReproducesLinearFieldsAndRenormalisesOverEnabledProbes) {
+    // Trilinear interpolation reproduces a linear field exactly: with each of the 27 numbers
+    // of probe p set to a + b . position(p), the blend at x is a + b . x (rounding aside).
+    // The blend's weights are the trilinear ones, computed here from x's place in its cell.
+    ProbeGrid grid;
+    grid.origin = {-1.f, 0.25f, 2.f};
+    grid.spacing = 0.5f;
+    grid.counts = {4, 3, 5};
+    ProbeVolume volume(grid, 2);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> unit(-1.f, 1.f);
+    std::array<float, 27> a;
+    std::array<glm::vec3, 27> b;
+    for (int i = 0; i < 27; ++i) {
+        a[i] = 3.f * unit(rng);
+        b[i] = glm::vec3(unit(rng), unit(rng), unit(rng));
+    }
+    for (std::uint32_t p = 0; p < volume.probeCount(); ++p)
+        for (int i = 0; i < 27; ++i)
+            (&volume.coefficients(p)[0].x)[i] = a[i] + glm::dot(b[i], grid.position(p));
+    const glm::vec3 size = grid.spacing * glm::vec3(grid.counts - 1);
+    std::uniform_real_distribution<float> share(0.f, 1.f);
+    for (int n = 0; n < 500; ++n) {
+        const glm::vec3 x = grid.origin + size * glm::vec3(share(rng), share(rng), share(rng));
+        sh::ShRgb L;
+        ProbeBlend blend;
+        ASSERT_TRUE(volume.interpolate(x, L, &blend));
+        for (int i = 0; i < 27; ++i) {
+            const double expected = double(a[i]) + glm::dot(glm::dvec3(b[i]), glm::dvec3(x));
+            // Some thirty float operations on terms of at most |a| + |b| |x| (about 10).
+            const double scale = std::abs(a[i]) + glm::length(b[i]) * glm::length(x);
+            EXPECT_NEAR((&L[0].x)[i], expected, 64.0 * kU * scale) << "number " << i;
+        }
+        const glm::dvec3 g = (glm::dvec3(x) - glm::dvec3(grid.origin)) / double(grid.spacing);
+        glm::dvec3 t;
+        glm::ivec3 cell;
+        for (int k = 0; k < 3; ++k) {
+            cell[k] = std::min(int(std::floor(g[k])), grid.counts[k] - 2);
+            t[k] = g[k] - cell[k];
+        }
+        for (int c = 0; c < 8; ++c) {
+            const glm::ivec3 corner = cell + glm::ivec3(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            EXPECT_EQ(
+                blend.probes[c],
+                std::uint32_t(corner.x + grid.counts.x * (corner.y + grid.counts.y * corner.z)));
+            const double w =
+                (c & 1 ? t.x : 1.0 - t.x) * (c & 2 ? t.y : 1.0 - t.y) * (c & 4 ? t.z : 1.0 - t.z);
+            EXPECT_NEAR(blend.weights[c], w, 1e-5) << "corner " << c;
+        }
+    }
+
+    // With probes disabled, the weights of the rest are renormalised: a constant field stays
+    // that constant, and the disabled probes (poisoned with NaN) are never read.
+    for (std::uint32_t p = 0; p < volume.probeCount(); ++p) {
+        const bool off = p % 3 == 0;
+        volume.setEnabled(p, !off);
+        volume.coefficients(p).fill(off ? glm::vec3(std::numeric_limits<float>::quiet_NaN())
+                                        : glm::vec3(2.5f));
+    }
+    for (int n = 0; n < 500; ++n) {
+        const glm::vec3 x = grid.origin + size * glm::vec3(share(rng), share(rng), share(rng));
+        sh::ShRgb L;
+        ASSERT_TRUE(volume.interpolate(x, L));
+        for (const glm::vec3& c : L)
+            for (int k = 0; k < 3; ++k)
+                EXPECT_NEAR(c[k], 2.5f, 2.5 * 16.0 * kU); // eight products and 1 / sum
+    }
+}
+
 TEST(ShProbes, InterpolationIsContinuousAcrossCells) {
     // Walk through the lit room across cell faces in x, y and z. At a face the value from
     // either side must agree to float rounding (1e-4 of the corner values' spread), while one
@@ -1074,7 +1145,9 @@ TEST(ShProbes, AMobileUnderTheLightRefreshesTheProbesInItsShadowFarBeyondItsReac
     room.system.projectAll(room.world);
     const auto fresh = room.probes();
     for (std::uint32_t p = 0; p < before.size(); ++p)
-        if (refreshed[p]) EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
+        if (refreshed[p]) {
+            EXPECT_TRUE(sameSh(after[p], fresh[p])) << "probe " << p;
+        }
 }
 
 TEST(ShProbes, AMobileTakenOutAndPutBackRefreshesItsRegion) {
