@@ -372,6 +372,44 @@ TEST(PointCacheQuery, GridFindsExactlyWhatBruteForceFinds) {
     }
 }
 
+TEST(PointCacheQuery, BlendIsTheFalloffWeightedMeanOfThePointsInRange) {
+    // Seed 003's blend, written out in double over the brute-force set: w = (1 - d / R)^k,
+    // value = sum w v / sum w, for direct, indirect and AO alike.
+    for (const std::uint32_t k : {1u, 2u, 3u}) {
+        PointCache cache = syntheticCache(2000, 5, k);
+        EXPECT_EQ(cache.weight(0.5f, 1.f), std::pow(0.5f, float(k))); // exact in float
+        EXPECT_EQ(cache.weight(1.f, 1.f), 0.f);
+        std::size_t blended = 0;
+        for (const Query& q : randomQueries(1000, 9)) {
+            const PointCacheSample s = cache.sample(q.x, q.n);
+            double wSum = 0.0, ao = 0.0;
+            glm::dvec3 direct(0.0), indirect(0.0);
+            const std::vector<std::uint32_t> in = bruteForce(cache, q);
+            for (const std::uint32_t p : in) {
+                const double d = glm::length(glm::dvec3(q.x) - glm::dvec3(cache.position[p]));
+                const double w = std::pow(1.0 - d / double(cache.searchRadius(p)), double(k));
+                wSum += w;
+                direct += w * glm::dvec3(cache.direct[p]);
+                indirect += w * glm::dvec3(cache.indirect[p]);
+                ao += w * double(cache.ao[p]);
+            }
+            if (!(wSum > 0.0)) continue;
+            ++blended;
+            // The code takes d in float (relative error a few u), so each weight is off by at
+            // most k x 4u; with values in [0, 3] (syntheticCache) the blend moves by at most that
+            // times count x 3 / sum w, plus the final float rounding.
+            const double bound =
+                4.0 * k * 0x1p-24 * double(in.size()) * 3.0 / wSum + 4.0 * 0x1p-24 * 3.0;
+            for (int c = 0; c < 3; ++c) {
+                EXPECT_NEAR(s.direct[c], direct[c] / wSum, bound);
+                EXPECT_NEAR(s.indirect[c], indirect[c] / wSum, bound);
+            }
+            EXPECT_NEAR(s.ao, ao / wSum, bound);
+        }
+        EXPECT_GT(blended, 500u);
+    }
+}
+
 TEST(PointCacheQuery, BlendIsAConvexCombinationAndReproducesAConstant) {
     for (const std::uint32_t k : {1u, 2u, 3u}) {
         PointCache cache = syntheticCache(2000, 3, k);
