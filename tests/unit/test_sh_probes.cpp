@@ -1271,6 +1271,40 @@ TEST(ShProbes, AvatarNextToAMovedMobileReactsWithinAFewFrames) {
     EXPECT_TRUE(sameSh(room.world.get<ShLighting>(avatar).coefficients, expected));
 }
 
+TEST(ShProbes, AMobileMovedIntoAnAvatarsCellRecomputesItsVisibility) {
+    // The avatar's cell spans x in [-1.25, -0.75], y and z in [0.25, 0.75]; the cube moves
+    // from outside it to its middle, hiding corners from some of its lattice points. The
+    // masks after the move must equal the masks computed afresh for the cube where it is now.
+    MobileRoom room(100000);
+    const glm::vec3 avatarAt(-1.1f, 0.6f, 0.4f);
+    addAvatar(room.world, avatarAt);
+    room.system.update(room.world, FrameContext{1});
+    room.world.clearChanges();
+    ProbeVolume& volume = room.world.ctx().get<ProbeVolume>();
+    glm::ivec3 coords;
+    glm::vec3 t;
+    volume.grid().locate(avatarAt, coords, t);
+    const std::uint32_t cell = volume.grid().cellIndex(coords);
+    ASSERT_TRUE(volume.visibilityReady(cell));
+    const std::uint32_t points = volume.latticePointsPerCell();
+    const auto masks = [&] {
+        const std::uint8_t* m = volume.visibilityMasks(cell);
+        return std::vector<std::uint8_t>(m, m + points);
+    };
+    const std::vector<std::uint8_t> before = masks();
+
+    room.moveCube({-1.f, 0.5f, 0.5f}, 2);
+    ASSERT_TRUE(volume.visibilityReady(cell)); // recomputed in the same frame
+    const std::vector<std::uint8_t> after = masks();
+    EXPECT_NE(after, before) << "the cube hides nothing: the test is vacuous";
+
+    volume.setVisibilityReady(cell, false); // computed afresh on the next update
+    room.system.update(room.world, FrameContext{3});
+    room.world.clearChanges();
+    ASSERT_TRUE(volume.visibilityReady(cell));
+    EXPECT_EQ(masks(), after);
+}
+
 TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
     // Budget 0: stale probes stay stale, so the marks can be inspected. One end point per
     // half-cell marks (minDeltaEndPoints = 1); the default 4 would ignore it.
