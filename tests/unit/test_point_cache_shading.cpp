@@ -195,13 +195,14 @@ struct Spread {
 };
 
 Spread shadeWithKeys(const RayScene& rays, const AreaLight& light, const glm::vec3& x,
-                     std::uint32_t samples, std::uint64_t seed) {
+                     std::uint32_t samples, std::uint64_t seed,
+                     const glm::vec3& normal = {0.f, 1.f, 0.f}) {
     double values[kKeys], visible[kKeys];
     Spread s;
     double visibleMean = 0.0;
     for (int k = 0; k < kKeys; ++k) {
         const LightSample ls =
-            shadeAreaLight(rays, light, 0, x, {0.f, 1.f, 0.f}, samples, seed, kFirstKey + k);
+            shadeAreaLight(rays, light, 0, x, normal, samples, seed, kFirstKey + k);
         values[k] = ls.irradiance.x;
         visible[k] = ls.visibility;
         s.mean += values[k] / kKeys;
@@ -237,6 +238,31 @@ TEST(PointCacheShading, UnoccludedLightMatchesLambertsClosedForm) {
             << x.x;
         EXPECT_FLOAT_EQ(s.minVisibility, 1.f);
         EXPECT_FLOAT_EQ(s.maxVisibility, 1.f);
+    }
+}
+
+TEST(PointCacheShading, TiltedReceiversMatchLambertsClosedForm) {
+    // Receivers turned 30 degrees about z and x, the whole light still above their horizon:
+    // the receiver's cosine and the light's are now different (on the flat floor below a
+    // level light they are equal, so swapping them would go unseen there).
+    ShadowScene scene(false);
+    const std::vector<AreaLight> lights = findAreaLights(scene.registry, Aabb{});
+    ASSERT_EQ(lights.size(), 1u);
+    const RayScene& rays = scene.registry.ctx().get<RayScene>();
+    const glm::dvec3 corners[4] = {{-kLightHalf, kLightY, -kLightHalf},
+                                   {kLightHalf, kLightY, -kLightHalf},
+                                   {kLightHalf, kLightY, kLightHalf},
+                                   {-kLightHalf, kLightY, kLightHalf}};
+    const float s30 = 0.5f, c30 = std::sqrt(3.f) / 2.f;
+    const glm::vec3 x(0.6f, 0.f, 0.2f);
+    for (const glm::vec3 n :
+         {glm::vec3(s30, c30, 0.f), glm::vec3(-s30, c30, 0.f), glm::vec3(0.f, c30, s30)}) {
+        for (const glm::dvec3& corner : corners)
+            ASSERT_GT(glm::dot(glm::dvec3(n), corner - glm::dvec3(x)), 0.0); // above the horizon
+        const double exact = lambertPolygon(glm::dvec3(x), glm::dvec3(n), corners);
+        const Spread s = shadeWithKeys(rays, lights[0], x, 64, 23, n);
+        EXPECT_NEAR(s.mean, exact, kT63Of1e5 * s.sd / std::sqrt(double(kKeys)) + kRounding * exact)
+            << n.x << "," << n.y << "," << n.z;
     }
 }
 
