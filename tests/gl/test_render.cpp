@@ -224,8 +224,9 @@ private:
 };
 
 /// A Cornell-like box (2 m cube, open towards +z, red left and green right wall) with one
-/// rotated block standing on the floor, seen from outside the open side. Returns the block.
-Entity buildCornellBox(SceneBuilder& scene) {
+/// rotated block standing on the floor at `blockPose`, seen from outside the open side.
+/// Returns the block.
+Entity buildCornellBox(SceneBuilder& scene, const glm::mat4& blockPose = kBlockPose) {
     const glm::vec3 white(0.75f), red(0.7f, 0.12f, 0.1f), green(0.15f, 0.6f, 0.1f);
     const glm::mat4 identity(1.f);
     scene.addMesh(quadMesh({{{-1, 0, 1}, {2, 0, 0}, {0, 0, -2}}}), identity, white); // floor
@@ -234,7 +235,7 @@ Entity buildCornellBox(SceneBuilder& scene) {
     scene.addMesh(quadMesh({{{-1, 0, 1}, {0, 0, -2}, {0, 2, 0}}}), identity, red);   // left
     scene.addMesh(quadMesh({{{1, 0, -1}, {0, 0, 2}, {0, 2, 0}}}), identity, green);  // right
     scene.addCamera({0.f, 1.f, 3.3f}, 0.8f);
-    return scene.addMesh(blockMesh({-0.3f, 0.f, -0.3f}, {0.3f, 1.1f, 0.3f}), kBlockPose,
+    return scene.addMesh(blockMesh({-0.3f, 0.f, -0.3f}, {0.3f, 1.1f, 0.3f}), blockPose,
                          glm::vec3(0.6f, 0.6f, 0.5f));
 }
 
@@ -331,6 +332,33 @@ TEST_F(RenderTest, CornellBoxSpotAndDirectionalLightsMatchCpuReference) {
     RenderSystem renderer(settings(ShadingMode::Hybrid));
     renderFrames(renderer);
     expectMatchesReference("cornell_spot_sun", renderer.readHdr(), scene.reference(),
+                           scene.range(settings(ShadingMode::Hybrid)));
+}
+
+// A pose that scales unevenly (normals need the inverse transpose) and one that mirrors (its
+// triangles turn clockwise on screen, and the front face is the other winding). The reference
+// transforms the normals by the inverse transpose in double (SceneBuilder::addMesh).
+TEST_F(RenderTest, UnevenlyScaledBlockMatchesCpuReference) {
+    SceneBuilder scene(mWorld);
+    // Turned before it is scaled, so that its faces' normals are off the scale's axes: the
+    // block becomes a slanted prism, whose normals the model matrix itself would turn wrong.
+    buildCornellBox(scene, kBlockPose * glm::scale(glm::mat4(1.f), {1.4f, 0.7f, 0.5f}) *
+                               glm::rotate(glm::mat4(1.f), 0.6f, glm::vec3(0.f, 1.f, 0.f)));
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer);
+    expectMatchesReference("cornell_scaled", renderer.readHdr(), scene.reference(),
+                           scene.range(settings(ShadingMode::Hybrid)));
+}
+
+TEST_F(RenderTest, MirroredBlockMatchesCpuReference) {
+    SceneBuilder scene(mWorld);
+    buildCornellBox(scene, kBlockPose * glm::scale(glm::mat4(1.f), {-1.f, 1.f, 1.f}));
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    scene.addDirectionalLight({-0.35f, -0.55f, -1.f}, {1.f, 0.95f, 0.85f}, 1.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer);
+    expectMatchesReference("cornell_mirrored", renderer.readHdr(), scene.reference(),
                            scene.range(settings(ShadingMode::Hybrid)));
 }
 
