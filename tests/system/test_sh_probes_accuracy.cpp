@@ -34,11 +34,16 @@
 //     errors): a probe system 5 % too bright fails at the brightest node (L00 and L20); one
 //     whose x terms (L11, L2-2, L21) change sign fails 21 comparisons of each, besides 170
 //     irradiances;
-//  2. per point and each of kNormals normals, the irradiance E(n) (cosine-weighted
-//     directions; pi mean L), truncation included.
-// About 1000 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
-// test has about one chance in a thousand of failing a correct system (the seeds are fixed,
-// so a given build passes or fails every time).
+//  2. per point and each of kNormals normals, the order-2 irradiance: what a perfect
+//     projection gives (the gather weighs each direction by the cosine's Legendre terms up
+//     to order 2), so no truncation allowance: quadrature, spread and basis constants only;
+//  3. per point and normal, the true irradiance E(n) (cosine-weighted directions; pi mean
+//     L), truncation included: how far an avatar's light may be from the real one;
+//  4. summed over the nodes, L00 and one order-2 irradiance: a brightness error common to
+//     every node, too small for any single comparison, fails here (a 3 % one does).
+// About 1800 comparisons; with a false-alarm rate of 5.7e-7 per term and comparison the whole
+// test has about three chances in a thousand of failing a correct system (the seeds are
+// fixed, so a given build passes or fails every time).
 #include "components/DirectionalLight.h"
 #include "components/LightStandIn.h"
 #include "components/Material.h"
@@ -68,6 +73,8 @@
 #include <cstdio>
 #include <limits>
 #include <optional>
+#include <span>
+#include <utility>
 #include <vector>
 
 namespace qgi {
@@ -135,17 +142,26 @@ public:
             });
     }
 
+    struct Projection {
+        std::array<Estimate, sh::kCoefficientCount> coefficients;
+        std::vector<Estimate> orderTwo; ///< per normal
+    };
+
     /// The nine SH coefficients of L around x, integral of L Y_i over the sphere: 4 pi mean of
     /// L Y_i over uniform directions, with the real harmonics written out here in double
-    /// (the engine's order: Y00; Y1-1, Y10, Y11 ~ y, z, x; Y2-2, Y2-1, Y20, Y21, Y22).
-    std::array<Estimate, sh::kCoefficientCount> projection(const glm::vec3& x,
-                                                           std::uint64_t key) const {
+    /// (the engine's order: Y00; Y1-1, Y10, Y11 ~ y, z, x; Y2-2, Y2-1, Y20, Y21, Y22). From
+    /// the same directions, for each of `normals`, the order-2 irradiance the nine give, by
+    /// the addition theorem the integral of L K(n . w) with K(t) = 1/4 + t/2 + 5 (3t^2 - 1)/32
+    /// (the cosine's Legendre terms up to order 2: the irradiance a perfect projection gives).
+    Projection projection(const glm::vec3& x, std::span<const glm::vec3> normals,
+                          std::uint64_t key) const {
         const double pi = glm::pi<double>();
         const double y0 = 0.5 / std::sqrt(pi), y1 = std::sqrt(3.0 / (4.0 * pi)),
                      y2 = std::sqrt(15.0 / (4.0 * pi)), y20 = std::sqrt(5.0 / (16.0 * pi)),
                      y22 = std::sqrt(15.0 / (16.0 * pi));
         std::uint64_t state = key * 0x2545f4914f6cdd1dull + 17;
         std::array<glm::dvec3, sh::kCoefficientCount> sum{}, sum2{};
+        std::vector<glm::dvec3> kernelSum(normals.size()), kernelSum2(normals.size());
         for (std::uint32_t i = 0; i < kSphereSamples; ++i) {
             const double u1 = uniform(state), u2 = uniform(state);
             const double z = 1.0 - 2.0 * u1, r = std::sqrt(std::max(0.0, 1.0 - z * z));
@@ -167,10 +183,18 @@ public:
                 sum[k] += L * y[k];
                 sum2[k] += L * y[k] * L * y[k];
             }
+            for (std::size_t k = 0; k < normals.size(); ++k) {
+                const double t = glm::dot(glm::dvec3(normals[k]), d);
+                const glm::dvec3 v = L * (0.25 + 0.5 * t + 5.0 * (3.0 * t * t - 1.0) / 32.0);
+                kernelSum[k] += v;
+                kernelSum2[k] += v * v;
+            }
         }
-        std::array<Estimate, sh::kCoefficientCount> out;
+        Projection out;
         for (int k = 0; k < sh::kCoefficientCount; ++k)
-            out[k] = meanAndError(sum[k], sum2[k], kSphereSamples);
+            out.coefficients[k] = meanAndError(sum[k], sum2[k], kSphereSamples);
+        for (std::size_t k = 0; k < normals.size(); ++k)
+            out.orderTwo.push_back(meanAndError(kernelSum[k], kernelSum2[k], kSphereSamples));
         return out;
     }
 
@@ -339,13 +363,13 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
         normals.push_back(sh::fibonacciDirection(k, kNormals));
     // Per point: the projection, then one irradiance per normal.
     const std::size_t perPoint = 1 + kNormals;
-    std::vector<std::array<Estimate, sh::kCoefficientCount>> projected(points.size());
+    std::vector<Gather::Projection> projected(points.size());
     std::vector<Estimate> gathered(points.size() * perPoint);
     tbb::parallel_for(std::size_t(0), gathered.size(), [&](std::size_t i) {
         const Point& p = points[i / perPoint];
         const std::size_t j = i % perPoint;
         if (j == 0)
-            projected[i / perPoint] = gather.projection(p.x, i);
+            projected[i / perPoint] = gather.projection(p.x, normals, i);
         else
             gathered[i] = gather.irradiance(p.x, normals[j - 1], i);
     });
@@ -395,7 +419,7 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
         std::printf("point (%.3f %.3f %.3f)%s, green, probe (gather):", p.x.x, p.x.y, p.x.z,
                     p.node ? " node" : "     ");
         for (int k = 0; k < sh::kCoefficientCount; ++k) {
-            const Estimate& ref = projected[i][k];
+            const Estimate& ref = projected[i].coefficients[k];
             const Estimate probe = compare(
                 p, ref, [k](const sh::ShRgb& L) { return L[k]; }, false, kNames[k]);
             std::printf(" %s %.3f (%.3f)", kNames[k], probe.mean.g, ref.mean.g);
@@ -403,10 +427,43 @@ TEST(ShProbesAccuracy, CornellProbesAgreeWithABruteForceGatherOfTheSameLight) {
         std::printf("\n");
         for (std::uint32_t k = 0; k < kNormals; ++k) {
             const glm::vec3 n = normals[k];
-            compare(
-                p, gathered[i * perPoint + 1 + k],
-                [n](const sh::ShRgb& L) { return sh::irradiance(L, n); }, true, "irradiance");
+            const auto irradiance = [n](const sh::ShRgb& L) { return sh::irradiance(L, n); };
+            // What the nine coefficients should give, with no truncation allowance; and the
+            // true irradiance, with it.
+            compare(p, projected[i].orderTwo[k], irradiance, false, "order-2 irradiance");
+            compare(p, gathered[i * perPoint + 1 + k], irradiance, true, "irradiance");
         }
+    }
+
+    // Pooled over the nodes: a brightness error common to all of them, too small to fail any
+    // one comparison, shows in the sum of the differences, held to kGatherZ of its standard
+    // error (the replicates' and the gather's, independent).
+    // Two quantities: L00 (normal 0 stands for it) and the order-2 irradiance along one normal.
+    for (const auto& [normal, name] :
+         {std::pair{0, "L00"}, std::pair{int(kNormals / 2), "order-2 irradiance"}}) {
+        glm::dvec3 difference(0.0), variance(0.0), integral(0.0);
+        for (std::size_t i = 0; i < points.size(); ++i) {
+            const Point& p = points[i];
+            if (!p.node) continue;
+            std::vector<glm::dvec3> values;
+            for (const sh::ShRgb& L : p.probe) {
+                values.push_back(normal == 0 ? glm::dvec3(L[0])
+                                             : glm::dvec3(sh::irradiance(L, normals[normal])));
+                integral += glm::dvec3(sh::integral(L)) / double(p.probe.size());
+            }
+            const Estimate probe = replicateMean(values);
+            const Estimate& reference =
+                normal == 0 ? projected[i].coefficients[0] : projected[i].orderTwo[normal];
+            difference += probe.mean - reference.mean;
+            variance += probe.standardError * probe.standardError +
+                        reference.standardError * reference.standardError;
+        }
+        for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(difference[c], 0.0,
+                        kGatherZ * std::sqrt(variance[c]) + kBasisRounding * integral[c])
+                << name << " summed over the nodes, channel " << c;
+        std::printf("%s summed over the nodes, green: probe - gather %.4f, standard error %.4f\n",
+                    name, difference.g, std::sqrt(variance.g));
     }
 }
 
