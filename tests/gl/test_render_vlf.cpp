@@ -24,6 +24,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <optional>
 #include <string>
 
@@ -133,7 +134,29 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
         // 3 corners, the divisions), ~10 more in the weights, whose errors a contrast of up to
         // 6 between neighbouring cells amplifies; on both sides: 2 (20 + 6 * 10) 2^-24 < 2^-16.
         constexpr double kRounding = 0x1p-16; // relative
-        int floorPixels = 0, failed = 0, lit = 0, loose = 0;
+        int floorPixels = 0, failed = 0, lit = 0, loose = 0, wallPixels = 0, wrongWalls = 0;
+        // The walls show their emission and nothing else (black, no irradiance, photon mode):
+        // where a pixel's ray leaves the room through one wall, 2 cm and more from its rims,
+        // it must read that emission exactly (a VLF lookup leaking onto them would not).
+        const auto wallEmission = [&](const glm::dvec3& dir) -> std::optional<glm::vec3> {
+            double t[3];
+            for (int a = 0; a < 3; ++a) {
+                const double low = a == 1 ? 0.0 : -1.0, high = a == 1 ? 2.0 : 1.0;
+                t[a] = dir[a] > 0   ? (high - eyeAt[a]) / dir[a]
+                       : dir[a] < 0 ? (low - eyeAt[a]) / dir[a]
+                                    : std::numeric_limits<double>::infinity();
+            }
+            const int axis = t[0] < t[1] ? (t[0] < t[2] ? 0 : 2) : (t[1] < t[2] ? 1 : 2);
+            const glm::dvec3 hit = eyeAt + t[axis] * dir;
+            for (int a = 0; a < 3; ++a) {
+                const double low = a == 1 ? 0.0 : -1.0, high = a == 1 ? 2.0 : 1.0;
+                if (a != axis && (hit[a] < low + 0.02 || hit[a] > high - 0.02)) return std::nullopt;
+            }
+            if (axis == 1) // the floor (the mirror) or the ceiling
+                return dir.y < 0 ? std::nullopt : std::optional(emitter(0.5f).emission);
+            if (axis == 2) return emitter(dir.z < 0 ? 1.f : 1.5f).emission;
+            return emitter(dir.x < 0 ? 2.f : 3.f).emission;
+        };
         double worst = 0, widest = 0;
         for (int y = 0; y < kSize; ++y)
             for (int x = 0; x < kSize; ++x) {
@@ -148,6 +171,20 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
                     return eyeAt + (-eyeAt.y / dir.y) * dir;
                 };
                 const std::optional<glm::dvec3> centre = floorAt(x + 0.5, y + 0.5);
+                const glm::dvec3 ray =
+                    orientation *
+                    glm::normalize(glm::dvec3((2.0 * (x + 0.5) / kSize - 1.0) * tanHalf,
+                                              (1.0 - 2.0 * (y + 0.5) / kSize) * tanHalf, -1.0));
+                if (const std::optional<glm::vec3> wall = wallEmission(ray)) {
+                    ++wallPixels;
+                    const float* got = hdr.pixel(x, y);
+                    // Emission passes the shader unchanged but for float rounding.
+                    bool same = true;
+                    for (int c = 0; c < 3; ++c)
+                        same &= std::abs(got[c] - (*wall)[c]) <= 1e-6f * (*wall)[c];
+                    wrongWalls += !same;
+                    continue;
+                }
                 if (!centre) continue;
                 const glm::dvec3 p = *centre;
                 if (std::abs(p.x) > 0.98 || std::abs(p.z) > 0.98) continue; // away from walls
@@ -181,11 +218,17 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
                 lit += expected.x > 0.f;
             }
         RecordProperty("floorPixels", floorPixels);
+        RecordProperty("wallPixels", wallPixels);
         RecordProperty("failedPixels", failed);
         RecordProperty("pixelsAllowedMoreThan1e-3", loose);
         RecordProperty("widestAllowance", std::to_string(widest));
         RecordProperty("worstErrorOverAllowance", std::to_string(worst));
         ASSERT_GT(floorPixels, kSize * kSize / 3);
+        EXPECT_GT(wallPixels, 100);
+        EXPECT_EQ(wrongWalls, 0) << "of " << wallPixels << " wall pixels";
+        // The allowance is wide only near the lookup's steps: at most a third of the floor
+        // (a quarter today), so that a discontinuity cannot widen the test unseen.
+        EXPECT_LT(loose, floorPixels / 3);
         EXPECT_GT(lit, floorPixels * 9 / 10);
         EXPECT_EQ(failed, 0) << failed << " of " << floorPixels
                              << " floor pixels outside their allowance; worst error " << worst
