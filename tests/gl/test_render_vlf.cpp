@@ -236,7 +236,7 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
     }
 }
 
-TEST(RenderVlf, AGlossyMetalIsDrawnWithItsDiffusePartOnly) {
+TEST(RenderVlf, APolishedMetalIsDrawnWithItsDiffusePartOnly) {
     // glTF metallic-roughness: a metal the VLF reads as specular (k_s = metallic) keeps only
     // k_d = baseColor (1 - metallic) as its diffuse albedo, or it would reflect more than it
     // receives; a rough one stays diffuse with albedo baseColor. The floor's two halves, lit
