@@ -72,17 +72,16 @@ ImageF renderFrame(Registry& world, ShadingMode mode) {
     return renderer.readHdr();
 }
 
-TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
+/// A room of emitting walls around a floor of material `floor` (specular, no diffuse part),
+/// seen from above: every floor pixel against the CPU lookup, every wall pixel against its
+/// emission.
+void expectShaderLookupMatchesTheCpuLookup(const Material& floor) {
     QGI_SKIP_WITHOUT_GL();
     GlWindow window(test::testWindow(kSize, kSize, "qgi test_render_vlf"));
     {
         Registry world;
-        Material mirror;
-        mirror.baseColor = glm::vec3(0.f);
-        mirror.specular = glm::vec3(0.8f, 0.7f, 0.6f);
-        mirror.phongExponent = 0.f;
         // Room [-1,1] x [0,2] x [-1,1], faces inwards; walls of different radiance.
-        addQuad(world, quadMesh({-1, 0, 1}, {2, 0, 0}, {0, 0, -2}), mirror);        // floor, +y
+        addQuad(world, quadMesh({-1, 0, 1}, {2, 0, 0}, {0, 0, -2}), floor);         // floor, +y
         addQuad(world, quadMesh({-1, 2, -1}, {2, 0, 0}, {0, 0, 2}), emitter(0.5f)); // ceiling
         addQuad(world, quadMesh({-1, 0, -1}, {2, 0, 0}, {0, 2, 0}), emitter(1.f));  // back, +z
         addQuad(world, quadMesh({1, 0, 1}, {-2, 0, 0}, {0, 2, 0}), emitter(1.5f));  // front, -z
@@ -100,7 +99,7 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
         const VlfField& field = world.ctx().get<VlfField>();
         ASSERT_EQ(field.vlf.specularFaceCount(), 1u);
 
-        // Photon mode, no direct light: the mirror shows the VLF alone.
+        // Photon mode, no direct light: the floor shows the VLF alone.
         const ImageF hdr = renderFrame(world, ShadingMode::Photon);
 
         // The pixel rays (square image) in double from the camera's float pose: their rounding
@@ -217,12 +216,12 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
                 loose += wide;
                 lit += expected.x > 0.f;
             }
-        RecordProperty("floorPixels", floorPixels);
-        RecordProperty("wallPixels", wallPixels);
-        RecordProperty("failedPixels", failed);
-        RecordProperty("pixelsAllowedMoreThan1e-3", loose);
-        RecordProperty("widestAllowance", std::to_string(widest));
-        RecordProperty("worstErrorOverAllowance", std::to_string(worst));
+        ::testing::Test::RecordProperty("floorPixels", floorPixels);
+        ::testing::Test::RecordProperty("wallPixels", wallPixels);
+        ::testing::Test::RecordProperty("failedPixels", failed);
+        ::testing::Test::RecordProperty("pixelsAllowedMoreThan1e-3", loose);
+        ::testing::Test::RecordProperty("widestAllowance", std::to_string(widest));
+        ::testing::Test::RecordProperty("worstErrorOverAllowance", std::to_string(worst));
         ASSERT_GT(floorPixels, kSize * kSize / 3);
         EXPECT_GT(wallPixels, 100);
         EXPECT_EQ(wrongWalls, 0) << "of " << wallPixels << " wall pixels";
@@ -234,6 +233,23 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookup) {
                              << " floor pixels outside their allowance; worst error " << worst
                              << " times its allowance";
     }
+}
+
+TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAMirror) {
+    Material mirror;
+    mirror.baseColor = glm::vec3(0.f);
+    mirror.specular = glm::vec3(0.8f, 0.7f, 0.6f);
+    mirror.phongExponent = 0.f;
+    expectShaderLookupMatchesTheCpuLookup(mirror);
+}
+
+TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAGlossyFloor) {
+    // The glossy branch: the tiles hold outgoing radiance, looked up along the view direction.
+    Material glossy;
+    glossy.baseColor = glm::vec3(0.f);
+    glossy.specular = glm::vec3(0.6f, 0.5f, 0.4f);
+    glossy.phongExponent = 20.f;
+    expectShaderLookupMatchesTheCpuLookup(glossy);
 }
 
 TEST(RenderVlf, APolishedMetalIsDrawnWithItsDiffusePartOnly) {
