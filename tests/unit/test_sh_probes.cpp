@@ -1256,16 +1256,25 @@ TEST(ShProbes, AvatarNextToAMovedMobileReactsWithinAFewFrames) {
     room.system.update(room.world, FrameContext{1});
     room.world.clearChanges();
     room.moveCube({-1.2f, 0.3f, 0.f}, 2);
+    std::vector<std::uint32_t> refreshed(room.system.lastRefreshed().begin(),
+                                         room.system.lastRefreshed().end());
     for (std::uint64_t f = 3; f < 6; ++f) {
         room.system.update(room.world, FrameContext{f});
         room.world.clearChanges();
+        refreshed.insert(refreshed.end(), room.system.lastRefreshed().begin(),
+                         room.system.lastRefreshed().end());
     }
     const ProbeVolume& volume = room.world.ctx().get<ProbeVolume>();
     glm::ivec3 cell;
     glm::vec3 t;
     volume.grid().locate(avatarAt, cell, t);
-    for (int c = 0; c < 8; ++c)
-        EXPECT_FALSE(room.system.isStale(volume.grid().cornerProbe(cell, c)));
+    for (int c = 0; c < 8; ++c) {
+        const std::uint32_t corner = volume.grid().cornerProbe(cell, c);
+        EXPECT_FALSE(room.system.isStale(corner));
+        // Refreshed since the move (not merely never marked).
+        EXPECT_NE(std::find(refreshed.begin(), refreshed.end(), corner), refreshed.end())
+            << "corner " << c;
+    }
     EXPECT_GT(room.system.staleCount(), 0u) << "everything refreshed: priority not exercised";
     // The avatar's lighting is the interpolation of the refreshed probes.
     sh::ShRgb expected;
@@ -1447,8 +1456,11 @@ TEST(ShProbes, AvatarExportWritesTheDocumentedCsv) {
     TwoRooms rooms;
     const Entity a = addAvatar(rooms.world, {-1.f, 1.f, 0.3f});
     rooms.world.emplace<Name>(a, Name{"walker, left"});
-    const Entity b = addAvatar(rooms.world, {1.f, 1.f, 0.3f});
+    // Both in the lit room, at different places: every column carries a value of its own.
+    const Entity b = addAvatar(rooms.world, {-1.5f, 0.6f, -0.4f});
     rooms.system.update(rooms.world, FrameContext{1});
+    for (const Entity e : {a, b})
+        ASSERT_GT(rooms.world.get<ShLighting>(e).coefficients[0].x, 0.f);
     const auto path = std::filesystem::temp_directory_path() / "qgi_test_avatar_sh.csv";
     exportAvatarSh(rooms.world, path);
     std::ifstream in(path);
@@ -1478,7 +1490,9 @@ TEST(ShProbes, AvatarExportWritesTheDocumentedCsv) {
         ASSERT_EQ(values.size(), 30u);
         const Entity e = row[0] == '"' ? a : b;
         const ShLighting& sh = rooms.world.get<ShLighting>(e);
-        EXPECT_FLOAT_EQ(values[0], rooms.world.get<WorldTransform>(e).matrix[3].x);
+        for (int axis = 0; axis < 3; ++axis)
+            EXPECT_FLOAT_EQ(values[std::size_t(axis)],
+                            rooms.world.get<WorldTransform>(e).matrix[3][axis]);
         for (int i = 0; i < 9; ++i)
             for (int c = 0; c < 3; ++c)
                 EXPECT_FLOAT_EQ(values[3 + 3 * i + c], sh.coefficients[i][c]);
