@@ -214,11 +214,14 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
                 // where a line grazes a shared edge (ARCHITECTURE.md, VLF: about 1e-5 of the
                 // flux sent).
                 EXPECT_LT(it.escaped[c], 1e-4 * it.sent[c]);
-                // Bookkeeping: every exchange's flux is received where it was sent (the same
+                // Bookkeeping only (the physics is the ratio below): every exchange's flux is
+                // received where it was sent, which catches a skipped receive (the same
                 // positive terms, each rounded in float in its own order: 3 ulp at most) ...
                 EXPECT_NEAR(it.received[c], it.sent[c], 3 * 0x1p-24 * it.sent[c]);
-                // ... and the irradiance maps hold what arrived: float accumulation of at
-                // most ~1e4 deposits per texel bounds the difference by 1e4 * 2^-24 relative.
+                // ... and the irradiance maps hold what arrived, which catches a deposit lost
+                // off the maps (a wrong texel area would cancel here: the ratio catches it):
+                // float accumulation of at most ~1e4 deposits per texel bounds the difference
+                // by 1e4 * 2^-24 relative.
                 EXPECT_NEAR(it.deposited[c], it.received[c], 1e4 * 0x1p-24 * it.received[c]);
             }
             EXPECT_EQ(it.lostDeposits, 0u);
@@ -228,6 +231,8 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
                 ratio[k][c].push_back(stats.iterations[k + 1].sent[c] /
                                       stats.iterations[k].reflectedDiffuse[c]);
     }
+    // The physics: what a pass sends is what the previous one left to reflect, so a lost
+    // 1/pi, a wrong line area or wrong solid-angle weights move the ratio off 1.
     for (int k = 0; k < 2; ++k)
         for (int c = 0; c < 3; ++c) {
             const auto [mean, se] = sampleMean(ratio[k][c]);
