@@ -300,7 +300,8 @@ RefImage traceReference(const std::vector<RefTriangle>& triangles,
                 glm::dvec3 toLight, term;
                 double distance;
                 if (lightTerm(lights[i], s, toLight, distance, term) != Facing::Towards ||
-                    occluded(bvh, s.triangle->surface, s.position, toLight, distance))
+                    (lights[i].castsShadow &&
+                     occluded(bvh, s.triangle->surface, s.position, toLight, distance)))
                     continue;
                 irradiance += term;
             }
@@ -365,6 +366,7 @@ RefRange referenceRange(const std::vector<RefTriangle>& triangles,
                         continue;
                     }
                     const bool clear =
+                        !lights[i].castsShadow ||
                         !occluded(bvh, s.triangle->surface, s.position, toLight, distance);
                     const double texel =
                         i < perturbation.shadowTexel.size() ? perturbation.shadowTexel[i] : 0.0;

@@ -41,6 +41,7 @@ struct RefLight {
     glm::dvec3 direction{0.0, 0.0, -1.0}; ///< spot axis / direction the light travels
     glm::dvec3 radiance{1.0};             ///< W/sr, or W/m^2 for directional
     double innerCone = 0.0, outerCone = 0.0;
+    bool castsShadow = true; ///< false: lights every surface that faces it (no shadow ray)
 };
 
 /// A pinhole camera at `position` looking along its local -Z with local Y up.
