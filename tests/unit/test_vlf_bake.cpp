@@ -7,10 +7,12 @@
 #include <glm/gtc/constants.hpp>
 #include <gtest/gtest.h>
 #include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -644,6 +646,75 @@ TEST(VlfBake, GlossyReflectionConservesEnergy) {
         // some cell: every lookup of its lobe is determined there.
         if (cells > 0) {
             EXPECT_GT(certain, 0) << "direction " << j;
+        }
+    }
+}
+
+TEST(VlfBake, GlossyLobesApproachTheContinuousBrdfAsDirectionsGrow) {
+    // The bake's discrete lobe (GlossyReflectionConservesEnergy checks the bake against it):
+    // w_ji = (n + 2) / (2 pi) cos^n(alpha) cos(theta_i) dOmega_i over the direction set's
+    // cells. Summed over i it is the discrete directional albedo a_j, which must approach the
+    // modified Phong BRDF's own, A(o) = (n + 2) / (2 pi) integral of cos^n(alpha) cos(theta_i)
+    // over the hemisphere (1 at normal incidence, less where the lobe dips below the horizon),
+    // as the directions grow: here by double quadrature on a fine (theta, phi) grid (the
+    // midpoint rule, 0.4 and 0.8 degree steps across a lobe some 15 degrees wide: its own
+    // error is far below the differences measured). Each level halves the cells' size, so a
+    // consistent discretisation must at least halve the error at each (a second-order one,
+    // as this is, quarters it); at the default level, 4, the albedo is within 3 % for
+    // directions up to 80 degrees from the normal (measured: 1.3 % at worst).
+    constexpr double kN = 30.0;
+    const double pi = std::acos(-1.0);
+    const glm::dvec3 normal(0.0, 1.0, 0.0);
+    const auto lobe = [&](const glm::dvec3& from, const glm::dvec3& o) {
+        const double cosI = glm::dot(normal, from);
+        const double ca = glm::dot(2.0 * cosI * normal - from, o);
+        return ca > 0.0 ? (kN + 2.0) / (2.0 * pi) * std::pow(ca, kN) * cosI : 0.0;
+    };
+    const auto continuous = [&](const glm::dvec3& o) {
+        constexpr int kTheta = 240, kPhi = 480;
+        double sum = 0.0;
+        for (int a = 0; a < kTheta; ++a) {
+            const double theta = (a + 0.5) * (pi / 2.0) / kTheta;
+            for (int b = 0; b < kPhi; ++b) {
+                const double phi = (b + 0.5) * 2.0 * pi / kPhi;
+                const glm::dvec3 from(std::sin(theta) * std::cos(phi), std::cos(theta),
+                                      std::sin(theta) * std::sin(phi));
+                sum += lobe(from, o) * std::sin(theta);
+            }
+        }
+        return sum * (pi / 2.0 / kTheta) * (2.0 * pi / kPhi);
+    };
+    double previous = 1e300;
+    for (const int level : {2, 3, 4}) {
+        const DirectionSet set(level);
+        const auto up = [&](std::size_t i) {
+            const glm::dvec3 d(set.direction(i));
+            return d.y >= 0.0 ? d : -d;
+        };
+        std::vector<double> errors(set.size(), std::numeric_limits<double>::quiet_NaN());
+        tbb::parallel_for(std::size_t(0), set.size(), [&](std::size_t j) {
+            const glm::dvec3 o = up(j);
+            if (o.y < 0.2) return; // within 80 degrees of the normal
+            double discrete = 0.0;
+            for (std::size_t i = 0; i < set.size(); ++i)
+                if (up(i).y > 0.0) discrete += lobe(up(i), o) * set.cellSolidAngle(i);
+            errors[j] = discrete - continuous(o);
+        });
+        double worst = 0.0, squares = 0.0;
+        int count = 0;
+        for (const double error : errors) {
+            if (std::isnan(error)) continue;
+            worst = std::max(worst, std::abs(error));
+            squares += error * error;
+            ++count;
+        }
+        const double rms = std::sqrt(squares / count);
+        std::printf("level %d: %zu directions, albedo error rms %.4f, worst %.4f\n", level,
+                    set.size(), rms, worst);
+        EXPECT_LT(rms, 0.5 * previous) << "level " << level;
+        previous = rms;
+        if (level == 4) {
+            EXPECT_LT(worst, 0.03);
         }
     }
 }
