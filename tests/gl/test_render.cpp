@@ -352,10 +352,11 @@ TEST_F(RenderTest, UnevenlyScaledBlockMatchesCpuReference) {
     // block becomes a slanted prism, whose normals the model matrix itself would turn wrong.
     buildCornellBox(scene, kBlockPose * glm::scale(glm::mat4(1.f), {1.4f, 0.7f, 0.5f}) *
                                glm::rotate(glm::mat4(1.f), 0.6f, glm::vec3(0.f, 1.f, 0.f)));
-    // The point light only: with the sun of the test above, a corner of the prism's shadow
-    // falls within one shadow lookup of the floor's corner with the left wall, where the
-    // shadow map's filter reads it 2 % lit; the range's nine shadow rays per lookup assume a
-    // straight shadow edge there (RefPerturbation), so they cannot bound that pixel.
+    // The point light only: with the sun of the test above, the prism's shadow edge meets the
+    // floor's corner with the left wall 3 mm from one pixel's point, and there the shadow
+    // map's filter, taking texels of the wall, reads it 2 % lit. The range's shadow rays
+    // (RefPerturbation) find the wall in their way at that concave corner and call the pixel
+    // certainly dark: a case its model leaves out.
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
     RenderSystem renderer(settings(ShadingMode::Hybrid));
     renderFrames(renderer);
