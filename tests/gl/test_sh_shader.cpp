@@ -16,11 +16,13 @@
 #include "systems/render/RenderSystem.h"
 
 #include <glm/gtc/constants.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <memory>
+#include <utility>
 
 namespace qgi {
 namespace {
@@ -45,11 +47,18 @@ Mesh squareFacing(const glm::vec3& c, const glm::vec3& n) {
 TEST(ShShader, EachCoefficientShadesAsTheCpuIrradiance) {
     QGI_SKIP_WITHOUT_GL();
     GlWindow window(test::testWindow(kSize, kSize, "qgi test_sh_shader"));
-    {
+    // Twice: as laid out below, and with the camera and every square moved and turned by one
+    // rigid motion G, each square's mesh given in its own turned object space. The image is
+    // the same but for the world normals, which the SH is read with: a shader that read it
+    // with the view-space or the object-space normal fails the second.
+    const glm::mat4 moved = glm::rotate(glm::translate(glm::mat4(1.f), {0.7f, -0.3f, 1.2f}), 0.8f,
+                                        glm::normalize(glm::vec3(1.f, 2.f, 0.5f)));
+    for (const glm::mat4& g : {glm::mat4(1.f), moved}) {
+        SCOPED_TRACE(g == glm::mat4(1.f) ? "in place" : "moved and turned");
         Registry world; // destroyed while the context is current
         const Entity camera = world.create();
         world.emplace<Camera>(camera, Camera{kFov, 0.05f, 20.f, true});
-        world.emplace<WorldTransform>(camera); // at the origin, looking along -Z
+        world.emplace<WorldTransform>(camera, WorldTransform{g}); // looking along g's -Z
 
         // Six squares 3 m ahead, each with its own normal (all turned towards the camera).
         const glm::vec3 normals[6] = {glm::vec3(0.f, 0.f, 1.f),
@@ -62,10 +71,21 @@ TEST(ShShader, EachCoefficientShadesAsTheCpuIrradiance) {
                                       {-0.6f, 0.4f},  {0.f, 0.4f},  {0.6f, 0.4f}};
         const glm::vec3 albedo(0.5f, 0.7f, 0.9f);
         Entity squares[6];
+        glm::vec3 worldNormals[6];
         for (int k = 0; k < 6; ++k) {
             squares[k] = world.create();
-            world.emplace<Mesh>(squares[k], squareFacing({centres[k], -3.f}, normals[k]));
-            world.emplace<WorldTransform>(squares[k]);
+            // Object space turned by r: the mesh as laid out, taken back through r.
+            const glm::mat4 r = glm::rotate(glm::mat4(1.f), 0.2f + 0.3f * float(k),
+                                            glm::normalize(glm::vec3(0.3f, 1.f, 0.2f)));
+            const glm::mat3 back = glm::transpose(glm::mat3(r));
+            Mesh mesh = squareFacing({centres[k], -3.f}, normals[k]);
+            for (glm::vec3& p : mesh.positions)
+                p = back * p;
+            for (glm::vec3& n : mesh.normals)
+                n = back * n;
+            world.emplace<Mesh>(squares[k], std::move(mesh));
+            world.emplace<WorldTransform>(squares[k], WorldTransform{g * r});
+            worldNormals[k] = glm::mat3(g) * normals[k];
             world.emplace<Material>(squares[k]).baseColor = albedo;
             world.emplace<Avatar>(squares[k]);
             world.emplace<ShLighting>(squares[k]);
@@ -91,7 +111,7 @@ TEST(ShShader, EachCoefficientShadesAsTheCpuIrradiance) {
             for (int k = 0; k < 6; ++k) {
                 const int px = int((centres[k].x * toNdc + 1.f) * 0.5f * kSize);
                 const int py = int((1.f - centres[k].y * toNdc) * 0.5f * kSize); // top row first
-                const glm::vec3 e = sh::irradiance(L, normals[k]);
+                const glm::vec3 e = sh::irradiance(L, worldNormals[k]);
                 for (int c = 0; c < 3; ++c) {
                     const float expected = albedo[c] * glm::one_over_pi<float>() * e[c];
                     EXPECT_NEAR(hdr.pixel(px, py)[c], expected, 1e-4f * expected + 1e-6f)
