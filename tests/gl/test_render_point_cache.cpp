@@ -30,16 +30,23 @@ constexpr float kAlbedo = 0.5f, kHeight = 3.f, kFov = 0.9f;
 TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
     QGI_SKIP_WITHOUT_GL();
     GlWindow context(test::testWindow(kSize, kSize, "qgi test_render_point_cache"));
-    {
+    // Each falloff exponent the settings allow (the shader has a branch for each).
+    for (const std::uint32_t falloff : {1u, 2u, 3u}) {
+        SCOPED_TRACE(::testing::Message() << "falloff exponent " << falloff);
         Registry world;
         // A 4 x 4 m floor at y = 0 facing up, no lights: the cache lights it where its points
-        // reach, its per-vertex irradiance elsewhere.
+        // reach, its per-vertex irradiance elsewhere. Its mesh is given in an object space
+        // turned about y and moved, so the shader must query with world positions.
+        const glm::mat4 model = glm::rotate(glm::translate(glm::mat4(1.f), {0.3f, 0.f, -0.2f}),
+                                            0.7f, glm::vec3(0.f, 1.f, 0.f));
         const Entity floor = world.create();
         Mesh& mesh = world.emplace<Mesh>(floor);
-        mesh.positions = {{-2.f, 0.f, 2.f}, {2.f, 0.f, 2.f}, {2.f, 0.f, -2.f}, {-2.f, 0.f, -2.f}};
+        for (const glm::vec3& corner : {glm::vec3(-2.f, 0.f, 2.f), glm::vec3(2.f, 0.f, 2.f),
+                                        glm::vec3(2.f, 0.f, -2.f), glm::vec3(-2.f, 0.f, -2.f)})
+            mesh.positions.push_back(glm::vec3(glm::inverse(model) * glm::vec4(corner, 1.f)));
         mesh.normals.assign(4, glm::vec3(0.f, 1.f, 0.f));
         mesh.indices = {0, 1, 2, 0, 2, 3};
-        world.emplace<WorldTransform>(floor);
+        world.emplace<WorldTransform>(floor, WorldTransform{model});
         Material material;
         material.baseColor = glm::vec3(kAlbedo);
         world.emplace<Material>(floor, material);
@@ -60,13 +67,23 @@ TEST(RenderPointCache, FragmentBlendMatchesTheCpuQuery) {
         world.emplace<WorldTransform>(camera, WorldTransform{pose});
 
         // Random points on the floor (a gap on the left half-plane x < -1.2 shows the fallback).
+        // A fifth of them turned off the floor's normal, and a fifth lifted off its plane, by
+        // amounts on both sides of the rules that leave such points out of a query.
         PointCache& cache = world.ctx().emplace<PointCache>();
+        cache.settings.falloffExponent = falloff;
         std::mt19937 rng(3);
         std::uniform_real_distribution<float> u(0.f, 1.f);
         for (int i = 0; i < 400; ++i) {
-            const glm::vec3 p(-1.0f + 3.f * u(rng), 0.f, -2.f + 4.f * u(rng));
+            glm::vec3 p(-1.0f + 3.f * u(rng), 0.f, -2.f + 4.f * u(rng));
+            glm::vec3 n(0.f, 1.f, 0.f);
+            if (i % 5 == 1) {
+                const float tilt = 1.4f * u(rng); // up to 80 degrees: the rule's limit is 60
+                n = glm::vec3(std::sin(tilt), std::cos(tilt), 0.f);
+            } else if (i % 5 == 2) {
+                p.y = 0.5f * (u(rng) - 0.5f); // up to 25 cm off: past half R for most
+            }
             cache.position.push_back(p);
-            cache.normal.push_back({0.f, 1.f, 0.f});
+            cache.normal.push_back(n);
             cache.radius.push_back(0.08f + 0.12f * u(rng));
             cache.dart.push_back(std::uint32_t(i));
             cache.ao.push_back(u(rng));
