@@ -44,12 +44,16 @@ using test::translation;
 constexpr float kLightHalf = 0.5f, kLightY = 1.5f;
 constexpr float kBlockerHalf = 0.3f, kBlockerY = 0.75f;
 constexpr float kRadiance = 10.f;
+// Far enough that the blocker never stands between it and the floor points the tests check
+// (|x| < 1.2: a ray to it passes the blocker's height past x = 1.15).
+constexpr float kSecondLightX = 4.f;
 
 struct ShadowScene {
     Registry registry;
     Entity blocker;
+    /// `secondLight`: a second panel like the first, centred kSecondLightX along x.
     explicit ShadowScene(bool withBlocker = true, bool blockerMobile = false,
-                         bool withCeiling = false) {
+                         bool withCeiling = false, bool secondLight = false) {
         addMesh(registry, gridMesh({-6.f, 0.f, 6.f}, {12.f, 0.f, 0.f}, {0.f, 0.f, -12.f}, 1),
                 glm::mat4(1.f), grey(0.5f), false, "floor");
         if (withCeiling) // darts from the floor land on it and back: points all over the floor
@@ -68,6 +72,11 @@ struct ShadowScene {
                 gridMesh({-kLightHalf, kLightY, -kLightHalf}, {2.f * kLightHalf, 0.f, 0.f},
                          {0.f, 0.f, 2.f * kLightHalf}, 1),
                 glm::mat4(1.f), light, false, "light");
+        if (secondLight)
+            addMesh(registry,
+                    gridMesh({kSecondLightX - kLightHalf, kLightY, -kLightHalf},
+                             {2.f * kLightHalf, 0.f, 0.f}, {0.f, 0.f, 2.f * kLightHalf}, 1),
+                    glm::mat4(1.f), light, false, "second light");
         test::buildRayScene(registry);
     }
 };
@@ -366,6 +375,57 @@ TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
     EXPECT_GE(lit, 10u);
     EXPECT_GE(penumbra, 25u);
     EXPECT_GT(shadowed, 5u);
+}
+
+TEST(PointCacheShading, TwoLightsAddUpAndKeepTheirOwnVisibility) {
+    // The blocker's scene with a second panel 4 m along x that the blocker never hides from
+    // the points checked: each point's stored light is the sum of the two closed forms, and
+    // its visible fraction per light is the first light's exact share and exactly 1.
+    ShadowScene scene(true, false, false, true);
+    PointCacheSettings settings;
+    settings.rMin = 0.06f;
+    settings.rMax = 0.25f;
+    settings.shadowSamples = 64;
+    settings.particleCount = 512;
+    settings.stopAfterRejections = 2000;
+    PointCacheSystem system(settings);
+    system.build(scene.registry);
+    const PointCache& cache = scene.registry.ctx().get<PointCache>();
+    ASSERT_EQ(cache.lightCount, 2u);
+    ASSERT_EQ(system.areaLights().size(), 2u);
+    // Which is which: the registry's order, told apart by their centres.
+    const std::size_t near = system.areaLights()[0].centre.x < 1.f ? 0 : 1, far = 1 - near;
+    const RayScene& rays = scene.registry.ctx().get<RayScene>();
+    const glm::dvec3 farCorners[4] = {{kSecondLightX - kLightHalf, kLightY, -kLightHalf},
+                                      {kSecondLightX + kLightHalf, kLightY, -kLightHalf},
+                                      {kSecondLightX + kLightHalf, kLightY, kLightHalf},
+                                      {kSecondLightX - kLightHalf, kLightY, kLightHalf}};
+    std::size_t checked = 0, shaded = 0;
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        const glm::vec3 x = cache.position[p];
+        if (!(std::abs(x.y) < 1e-4f && cache.normal[p].y > 0.99f && std::abs(x.x) < 1.2f &&
+              std::abs(x.z) < 1.2f))
+            continue;
+        const double nearExact = exactIrradiance(x, true), nearOpen = exactIrradiance(x, false);
+        const double farExact = lambertPolygon(glm::dvec3(x), {0.0, 1.0, 0.0}, farCorners);
+        // Each light's stream is its own (keyed by the light's index): the spreads add.
+        const Spread a = shadeWithKeys(rays, system.areaLights()[near], x, settings.shadowSamples,
+                                       settings.seed);
+        const Spread b =
+            shadeWithKeys(rays, system.areaLights()[far], x, settings.shadowSamples, settings.seed);
+        EXPECT_NEAR(cache.direct[p].x, nearExact + farExact,
+                    kT63Of1e6 * std::sqrt(a.sd * a.sd + b.sd * b.sd) +
+                        kRounding * (nearOpen + farExact))
+            << p << " at " << x.x << ", " << x.z;
+        EXPECT_NEAR(cache.visibility[p * 2 + near], nearExact / nearOpen,
+                    kT63Of1e6 * a.visibilitySd + 1e-5)
+            << p;
+        EXPECT_EQ(cache.visibility[p * 2 + far], 1.f) << p;
+        ++checked;
+        shaded += nearExact < 0.95 * nearOpen ? 1 : 0;
+    }
+    EXPECT_GE(checked, 50u);
+    EXPECT_GE(shaded, 20u); // the near light's visibility is not 1 everywhere either
 }
 
 // ---- the cache file --------------------------------------------------------------------------
