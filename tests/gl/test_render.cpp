@@ -281,6 +281,10 @@ void expectMatchesReference(const std::string& name, const ImageF& actual,
     EXPECT_EQ(c.failed, 0u) << name << ": " << c.failed << " pixels outside their range ("
                             << c.excused << " of " << c.failures.size()
                             << " have a range wider than the tolerance)";
+    // Wide ranges are silhouettes and shadow bands: 5 to 21 % of these images on llvmpipe
+    // (coarser sub-pixel snapping elsewhere widens them a little). Bounded, so that a change
+    // that widens them much cannot pass unseen.
+    EXPECT_LT(c.excused, c.failures.size() * 35 / 100) << name << ": too many wide ranges";
     if (c.failed > 0)
         test::writeFailureImages(fs::path(QGI_TEST_OUTPUT_DIR), name, actual, expected);
 }

@@ -209,6 +209,10 @@ TEST_F(BuiltinCornellTest, DirectLightMatchesCpuReference) {
     RecordProperty("worstNarrowError", std::to_string(c.worstNarrow));
     EXPECT_EQ(c.failed, 0u) << c.failed << " pixels outside their range (" << c.excused << " of "
                             << c.failures.size() << " have a range wider than the tolerance)";
+    // Wide ranges are silhouettes and shadow bands (15 % of this image on llvmpipe; coarser
+    // sub-pixel snapping elsewhere widens them a little): bounded, so that a change that
+    // widens them much cannot pass unseen.
+    EXPECT_LT(c.excused, c.failures.size() / 4);
 
     // The luminaire, a strip of about 16 x 3 pixels, must be in view; its pixels (those
     // brighter than half its emission: nothing else in view reflects a tenth of that) are
