@@ -376,7 +376,11 @@ TEST(ShProbes, ANonFiniteVertexIrradianceIsReadAsNoLight) {
     };
     const glm::dvec3 clean = meanL00(false), poisoned = meanL00(true);
     for (int c = 0; c < 3; ++c) {
-        EXPECT_LT(poisoned[c], 0.1 * clean[c]); // the hole shows
+        // The hole shows: every triangle that keeps its light lies at least 50 / sqrt 2 - 0.5 =
+        // 34.7 m from each probe (|x|, |z| <= 0.5, heights up to 1.5 m), within
+        // atan(1.5 / 34.7) = 2.5 degrees of its horizon: a band of sin(2.5 deg) = 0.043 of the
+        // lower hemisphere, which a probe's stratified rays sample closely (measured: 0.013).
+        EXPECT_LT(poisoned[c], 0.05 * clean[c]);
         EXPECT_GT(poisoned[c], 0.0);            // and the rest of the floor
     }
 }
