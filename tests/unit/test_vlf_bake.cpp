@@ -354,7 +354,9 @@ TEST(VlfBake, DiffuseErrorFallsAsDirectionsGrow) {
         const double lhs = ratio * mse[fine].mean, rhs = mse[coarse].mean;
         const double se = std::hypot(ratio * mse[fine].standardError, mse[coarse].standardError);
         EXPECT_LE(lhs, rhs + kT * se) << "levels " << coarse << " -> " << fine;
-        EXPECT_LT(se, 0.5 * rhs) << "precise enough to tell the rate";
+        // Measured 8 to 12 %: the rate is told apart from a slower one (a ratio of 4 or so
+        // between levels against the 3.7 to 4 required).
+        EXPECT_LT(se, 0.15 * rhs) << "precise enough to tell the rate";
     };
     for (int level = 1; level < 4; ++level)
         atLeastAsFast(level, level + 1);
@@ -1038,7 +1040,8 @@ TEST(VlfBake, NonPlanarQuadsReadPiLeThroughTheFaceThatHoldsThePoint) {
         // Student t with 15 degrees of freedom: |t| > 6.5 has probability 1e-5, so all 54
         // probes pass together with probability > 0.999.
         EXPECT_NEAR(mean, expected, 6.5 * se + 1e-5 * expected) << "probe " << p;
-        EXPECT_LT(se, 0.1 * expected) << "the estimate should be precise enough to test";
+        // Measured under 0.5 %: 6.5 standard errors stay within 4 % of pi L_e.
+        EXPECT_LT(se, 0.006 * expected) << "the estimate should be precise enough to test";
     }
 }
 
