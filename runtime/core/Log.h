@@ -12,6 +12,7 @@ enum class LogLevel { Debug, Info, Warning, Error, Quiet };
 
 void setLogLevel(LogLevel level);
 LogLevel logLevel();
+void logMessage(LogLevel level, const std::string& message);
 
 /// Sets the log level for a scope and puts the previous one back when it ends (also when an
 /// exception or a failed test assertion leaves the scope early).
@@ -25,7 +26,6 @@ public:
 private:
     LogLevel mPrevious;
 };
-void logMessage(LogLevel level, const std::string& message);
 
 /// `text` safe to print on a terminal: control characters (escape sequences in a hostile
 /// file's names, a stray carriage return) become \xNN, so a message cannot move the cursor,

@@ -310,6 +310,14 @@ protected:
         return s;
     }
 
+    /// One frame of the scene in hybrid mode against its CPU reference (expectMatchesReference).
+    void expectHybridFrameMatchesReference(const std::string& name, const SceneBuilder& scene) {
+        RenderSystem renderer(settings(ShadingMode::Hybrid));
+        renderFrames(renderer);
+        expectMatchesReference(name, renderer.readHdr(), scene.reference(),
+                               scene.range(settings(ShadingMode::Hybrid)));
+    }
+
     /// Runs `frames` frames the way the Schedule does (changes cleared after each).
     void renderFrames(RenderSystem& renderer, int frames = 1) {
         for (int f = 0; f < frames; ++f) {
@@ -329,10 +337,7 @@ TEST_F(RenderTest, CornellBoxPointLightMatchesCpuReference) {
     SceneBuilder scene(mWorld);
     buildCornellBox(scene);
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
-    expectMatchesReference("cornell_point", renderer.readHdr(), scene.reference(),
-                           scene.range(settings(ShadingMode::Hybrid)));
+    expectHybridFrameMatchesReference("cornell_point", scene);
 }
 
 TEST_F(RenderTest, CornellBoxSpotAndDirectionalLightsMatchCpuReference) {
@@ -341,10 +346,7 @@ TEST_F(RenderTest, CornellBoxSpotAndDirectionalLightsMatchCpuReference) {
     scene.addSpotLight({0.3f, 1.9f, 0.2f}, {-0.3f, -1.f, -0.2f}, {0.9f, 0.9f, 1.f}, 4.f, 0.3f,
                        0.6f);
     scene.addDirectionalLight({-0.35f, -0.55f, -1.f}, {1.f, 0.95f, 0.85f}, 1.5f);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
-    expectMatchesReference("cornell_spot_sun", renderer.readHdr(), scene.reference(),
-                           scene.range(settings(ShadingMode::Hybrid)));
+    expectHybridFrameMatchesReference("cornell_spot_sun", scene);
 }
 
 // A pose that scales unevenly (normals need the inverse transpose) and one that mirrors (its
@@ -362,10 +364,7 @@ TEST_F(RenderTest, UnevenlyScaledBlockMatchesCpuReference) {
     // (RefPerturbation) find the wall in their way at that concave corner and call the pixel
     // certainly dark: a case its model leaves out.
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
-    expectMatchesReference("cornell_scaled", renderer.readHdr(), scene.reference(),
-                           scene.range(settings(ShadingMode::Hybrid)));
+    expectHybridFrameMatchesReference("cornell_scaled", scene);
 }
 
 TEST_F(RenderTest, MirroredBlockMatchesCpuReference) {
@@ -373,10 +372,7 @@ TEST_F(RenderTest, MirroredBlockMatchesCpuReference) {
     buildCornellBox(scene, kBlockPose * glm::scale(glm::mat4(1.f), {-1.f, 1.f, 1.f}));
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
     scene.addDirectionalLight({-0.35f, -0.55f, -1.f}, {1.f, 0.95f, 0.85f}, 1.5f);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
-    expectMatchesReference("cornell_mirrored", renderer.readHdr(), scene.reference(),
-                           scene.range(settings(ShadingMode::Hybrid)));
+    expectHybridFrameMatchesReference("cornell_mirrored", scene);
 }
 
 TEST_F(RenderTest, NoPassInheritsTheGlStateItFinds) {
@@ -825,10 +821,7 @@ TEST_F(RenderTest, LightsPastTheLimitsAreDroppedOrUnshadowedNotFatal) {
     static_assert(shader::kMaxLights == 64 && shader::kMaxShadowLayers == 32);
     scene.keepFirstLights(64);
     scene.unshadowFrom(5);
-    RenderSystem renderer(settings(ShadingMode::Hybrid));
-    renderFrames(renderer);
-    expectMatchesReference("light_limits", renderer.readHdr(), scene.reference(),
-                           scene.range(settings(ShadingMode::Hybrid)));
+    expectHybridFrameMatchesReference("light_limits", scene);
 }
 
 // ---- shader loading, dirty-range merging --------------------------------------------------

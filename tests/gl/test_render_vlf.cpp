@@ -235,21 +235,23 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor) {
     }
 }
 
+/// A floor that reflects only specularly: k_s `specular`, Phong exponent `exponent` (0: a
+/// mirror).
+Material specularFloor(const glm::vec3& specular, float exponent) {
+    Material m;
+    m.baseColor = glm::vec3(0.f);
+    m.specular = specular;
+    m.phongExponent = exponent;
+    return m;
+}
+
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAMirror) {
-    Material mirror;
-    mirror.baseColor = glm::vec3(0.f);
-    mirror.specular = glm::vec3(0.8f, 0.7f, 0.6f);
-    mirror.phongExponent = 0.f;
-    expectShaderLookupMatchesTheCpuLookup(mirror);
+    expectShaderLookupMatchesTheCpuLookup(specularFloor({0.8f, 0.7f, 0.6f}, 0.f));
 }
 
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAGlossyFloor) {
     // The glossy branch: the tiles hold outgoing radiance, looked up along the view direction.
-    Material glossy;
-    glossy.baseColor = glm::vec3(0.f);
-    glossy.specular = glm::vec3(0.6f, 0.5f, 0.4f);
-    glossy.phongExponent = 20.f;
-    expectShaderLookupMatchesTheCpuLookup(glossy);
+    expectShaderLookupMatchesTheCpuLookup(specularFloor({0.6f, 0.5f, 0.4f}, 20.f));
 }
 
 TEST(RenderVlf, APolishedMetalIsDrawnWithItsDiffusePartOnly) {

@@ -320,14 +320,28 @@ TEST(PointCacheShading, SoftShadowBehindABlockerMatchesTheReference) {
     EXPECT_EQ(penumbra, 5);
 }
 
-TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
-    ShadowScene scene;
+/// The point set the stored-shading tests build over the shadow scene: 64 shadow samples.
+PointCacheSettings shadowPointSettings() {
     PointCacheSettings settings;
     settings.rMin = 0.06f;
     settings.rMax = 0.25f;
     settings.shadowSamples = 64;
     settings.particleCount = 512;
     settings.stopAfterRejections = 2000;
+    return settings;
+}
+
+/// Whether point p lies on the floor facing up, within 1.2 m of the light's foot along x and
+/// z: where the closed forms of the shadow scene are checked.
+bool onCheckedFloor(const PointCache& cache, std::size_t p) {
+    const glm::vec3 x = cache.position[p];
+    return std::abs(x.y) < 1e-4f && cache.normal[p].y > 0.99f && std::abs(x.x) < 1.2f &&
+           std::abs(x.z) < 1.2f;
+}
+
+TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
+    ShadowScene scene;
+    const PointCacheSettings settings = shadowPointSettings();
     PointCacheSystem system(settings);
     system.build(scene.registry);
     const PointCache& cache = scene.registry.ctx().get<PointCache>();
@@ -337,9 +351,7 @@ TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
     double difference = 0.0, variance = 0.0, rounding = 0.0, expected = 0.0;
     for (std::size_t p = 0; p < cache.size(); ++p) {
         const glm::vec3 x = cache.position[p];
-        if (!(std::abs(x.y) < 1e-4f && cache.normal[p].y > 0.99f && std::abs(x.x) < 1.2f &&
-              std::abs(x.z) < 1.2f))
-            continue;
+        if (!onCheckedFloor(cache, p)) continue;
         ASSERT_LT(cache.dart[p], kFirstKey); // the stored estimate is independent of the spread
         const double exact = exactIrradiance(x, true), open = exactIrradiance(x, false);
         // The stored value is one estimate; kKeys more give its spread: (stored - exact) / sd
@@ -382,12 +394,7 @@ TEST(PointCacheShading, TwoLightsAddUpAndKeepTheirOwnVisibility) {
     // the points checked: each point's stored light is the sum of the two closed forms, and
     // its visible fraction per light is the first light's exact share and exactly 1.
     ShadowScene scene(true, false, false, true);
-    PointCacheSettings settings;
-    settings.rMin = 0.06f;
-    settings.rMax = 0.25f;
-    settings.shadowSamples = 64;
-    settings.particleCount = 512;
-    settings.stopAfterRejections = 2000;
+    const PointCacheSettings settings = shadowPointSettings();
     PointCacheSystem system(settings);
     system.build(scene.registry);
     const PointCache& cache = scene.registry.ctx().get<PointCache>();
@@ -403,9 +410,7 @@ TEST(PointCacheShading, TwoLightsAddUpAndKeepTheirOwnVisibility) {
     std::size_t checked = 0, shaded = 0;
     for (std::size_t p = 0; p < cache.size(); ++p) {
         const glm::vec3 x = cache.position[p];
-        if (!(std::abs(x.y) < 1e-4f && cache.normal[p].y > 0.99f && std::abs(x.x) < 1.2f &&
-              std::abs(x.z) < 1.2f))
-            continue;
+        if (!onCheckedFloor(cache, p)) continue;
         const double nearExact = exactIrradiance(x, true), nearOpen = exactIrradiance(x, false);
         const double farExact = lambertPolygon(glm::dvec3(x), {0.0, 1.0, 0.0}, farCorners);
         // Each light's stream is its own (keyed by the light's index): the spreads add.

@@ -126,6 +126,15 @@ glm::vec3 cellCentreLine(const Vlf& v, std::size_t psf, int i, int j) {
     return v.linePoint(psf, {-1.f + (float(i) + 0.5f) * h, -1.f + (float(j) + 0.5f) * h});
 }
 
+/// Where the centre line of cell (i, j) of subfield psf meets face f's plane: the point the
+/// cell's value belongs to.
+glm::vec3 cellPointOnFace(const Vlf& v, const Face& f, std::size_t psf, int i, int j) {
+    const glm::vec3 p = cellCentreLine(v, psf, i, j);
+    const glm::vec3& line = v.directions().direction(psf);
+    const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, line);
+    return p + t * line;
+}
+
 /// The settings of the emitter-over-floor bakes: one iteration, no filter, texels two line
 /// cells wide, `jitterSamples` jittered directions per subfield.
 VlfSettings floorBake(int level, int jitterSamples, std::uint64_t seed) {
@@ -516,9 +525,7 @@ TEST(VlfBake, LookupAtAStoredDirectionAndCellCentreIsExact) {
             for (int i = 0; i < s.linesPerSide; i += 3) {
                 const std::int64_t c = v.cellIndex(0, psf, i, j);
                 if (c < 0 || v.tiles()[std::size_t(c)].w <= 0.f) continue;
-                const glm::vec3 p = cellCentreLine(v, psf, i, j);
-                const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, d);
-                const glm::vec3 x = p + t * d;
+                const glm::vec3 x = cellPointOnFace(v, f, psf, i, j);
                 const glm::vec3 got = v.specularRadiance(face, x, d);
                 EXPECT_EQ(got, glm::vec3(v.tiles()[std::size_t(c)])) << psf << " " << i << "," << j;
                 ++checked;
@@ -812,16 +819,12 @@ TEST(VlfBake, GlossyDirectPassIsThePhongLobeOfAPointLight) {
     for (std::size_t psf = 0; psf < v.directions().size(); ++psf) {
         const TileBlock& bl = v.block(0, psf);
         if (bl.side == 0) continue;
-        const glm::vec3 line = v.directions().direction(psf);
-        const glm::dvec3 o = glm::dvec3(float(bl.side) * line);
+        const glm::dvec3 o = glm::dvec3(float(bl.side) * v.directions().direction(psf));
         for (int j = 0; j < s.linesPerSide; ++j)
             for (int i = 0; i < s.linesPerSide; ++i) {
                 const std::int64_t c = v.cellIndex(0, psf, i, j);
                 if (c < 0 || v.tiles()[std::size_t(c)].w <= 0.f) continue;
-                // The cell's point: its line's centre met with the floor's plane.
-                const glm::vec3 p = cellCentreLine(v, psf, i, j);
-                const float t = (f.offset - glm::dot(f.normal, p)) / glm::dot(f.normal, line);
-                const glm::dvec3 x = glm::dvec3(p + t * line);
+                const glm::dvec3 x = glm::dvec3(cellPointOnFace(v, f, psf, i, j));
                 // In double, from the definitions.
                 const glm::dvec3 toLight = glm::dvec3(light.position) - x;
                 const double r = glm::length(toLight);
