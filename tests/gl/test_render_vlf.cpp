@@ -23,6 +23,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <limits>
 #include <optional>
@@ -72,16 +73,31 @@ ImageF renderFrame(Registry& world, ShadingMode mode) {
     return renderer.readHdr();
 }
 
+/// The floor of the room below: y = 0, facing up. With `faceBelowFirst`, the same entity
+/// first holds a second specular face, 1 cm under the floor and facing down (out of view, and
+/// nothing reaches it), so the shader has to pick the floor out of the item's two faces.
+Mesh floorMesh(bool faceBelowFirst) {
+    const Mesh floor = quadMesh({-1, 0, 1}, {2, 0, 0}, {0, 0, -2});
+    if (!faceBelowFirst) return floor;
+    Mesh mesh = quadMesh({-1, -0.01f, 1}, {0, 0, -2}, {2, 0, 0});
+    const auto base = std::uint32_t(mesh.positions.size());
+    mesh.positions.insert(mesh.positions.end(), floor.positions.begin(), floor.positions.end());
+    mesh.normals.insert(mesh.normals.end(), floor.normals.begin(), floor.normals.end());
+    for (const std::uint32_t i : floor.indices)
+        mesh.indices.push_back(base + i);
+    return mesh;
+}
+
 /// A room of emitting walls around a floor of material `floor` (specular, no diffuse part),
 /// seen from above: every floor pixel against the CPU lookup, every wall pixel against its
 /// emission.
-void expectShaderLookupMatchesTheCpuLookup(const Material& floor) {
+void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelowFirst = false) {
     QGI_SKIP_WITHOUT_GL();
     GlWindow window(test::testWindow(kSize, kSize, "qgi test_render_vlf"));
     {
         Registry world;
         // Room [-1,1] x [0,2] x [-1,1], faces inwards; walls of different radiance.
-        addQuad(world, quadMesh({-1, 0, 1}, {2, 0, 0}, {0, 0, -2}), floor);         // floor, +y
+        addQuad(world, floorMesh(faceBelowFirst), floor);                           // floor, +y
         addQuad(world, quadMesh({-1, 2, -1}, {2, 0, 0}, {0, 0, 2}), emitter(0.5f)); // ceiling
         addQuad(world, quadMesh({-1, 0, -1}, {2, 0, 0}, {0, 2, 0}), emitter(1.f));  // back, +z
         addQuad(world, quadMesh({1, 0, 1}, {-2, 0, 0}, {0, 2, 0}), emitter(1.5f));  // front, -z
@@ -97,7 +113,7 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor) {
 
         bakeField(world, 3, 32, 8, 2);
         const VlfField& field = world.ctx().get<VlfField>();
-        ASSERT_EQ(field.vlf.specularFaceCount(), 1u);
+        ASSERT_EQ(field.vlf.specularFaceCount(), faceBelowFirst ? 2u : 1u);
 
         // Photon mode, no direct light: the floor shows the VLF alone.
         const ImageF hdr = renderFrame(world, ShadingMode::Photon);
@@ -107,7 +123,8 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor) {
         const double tanHalf = std::tan(0.5 * double(world.get<Camera>(cam).yfov));
         const glm::dmat3 orientation(pose);
         const glm::dvec3 eyeAt(pose[3]);
-        const std::uint32_t face = field.vlf.specularFace(0);
+        const std::uint32_t face = field.vlf.specularFace(faceBelowFirst ? 1 : 0);
+        ASSERT_GT(field.vlf.faces()[face].normal.y, 0.99f); // the floor
         const auto lookup = [&](const glm::dvec3& p) {
             return field.vlf.specularRadiance(face, glm::vec3(p),
                                               glm::vec3(glm::normalize(eyeAt - p)));
@@ -252,6 +269,12 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAMirror) {
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAGlossyFloor) {
     // The glossy branch: the tiles hold outgoing radiance, looked up along the view direction.
     expectShaderLookupMatchesTheCpuLookup(specularFloor({0.6f, 0.5f, 0.4f}, 20.f));
+}
+
+TEST(RenderVlf, ShaderPicksTheFaceUnderTheFragmentOfATwoFaceMirror) {
+    // The item's faces are consecutive in the field, the floor second: the shader's loop over
+    // them, and the renderer's range of them, must find the floor for every floor pixel.
+    expectShaderLookupMatchesTheCpuLookup(specularFloor({0.8f, 0.7f, 0.6f}, 0.f), true);
 }
 
 TEST(RenderVlf, APolishedMetalIsDrawnWithItsDiffusePartOnly) {
