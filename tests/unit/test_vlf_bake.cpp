@@ -199,6 +199,13 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
     b.quad({-0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, -0.2f}, {0.2f, 1.99f, 0.2f}, {-0.2f, 1.99f, 0.2f},
            lamp);
     const auto scene = b.build();
+    // Two of the checks below are physics: nothing escapes the closed room, and each pass
+    // sends what the previous one left on the walls to reflect (the ratio at the end). The
+    // others are bookkeeping: received = sent adds the same flux of each exchange to two
+    // sums, and deposited = received undoes the texel area and coverage that the deposit
+    // divided by, so neither sees a wrong flux, only one dropped on the way. The room is
+    // diffuse only: the light glossy faces send on is checked by
+    // GlossyLightReachesADiffuseCeiling.
     // Independent seeds: each pass's sent flux is an unbiased estimate of what the previous
     // pass left on the diffuse walls to reflect, k_d x the flux deposited in its texels (the
     // exact integral of the piecewise-constant maps the senders read; no filter).
@@ -225,9 +232,9 @@ TEST(VlfBake, EnergyIsConservedPerPass) {
                 // where a line grazes a shared edge (ARCHITECTURE.md, VLF: about 1e-5 of the
                 // flux sent).
                 EXPECT_LT(it.escaped[c], 1e-4 * it.sent[c]);
-                // Bookkeeping only (the physics is the ratio below): every exchange's flux is
-                // received where it was sent, which catches a skipped receive (the same
-                // positive terms, each rounded in float in its own order: 3 ulp at most) ...
+                // Bookkeeping: every exchange's flux is received where it was sent, which catches a
+                // skipped receive (the same positive terms, each rounded in float in its own order:
+                // 3 ulp at most) ...
                 EXPECT_NEAR(it.received[c], it.sent[c], 3 * 0x1p-24 * it.sent[c]);
                 // ... and the irradiance maps hold what arrived, which catches a deposit lost
                 // off the maps (a wrong texel area would cancel here: the ratio catches it):
@@ -852,6 +859,216 @@ TEST(VlfBake, GlossyDirectPassIsThePhongLobeOfAPointLight) {
     EXPECT_GT(checked, 1000);
     EXPECT_GT(lit, 50);   // the lobe is seen, not just its dark tail
     EXPECT_GT(peak, 1.0); // and its peak: (22 / 2 pi) 0.6 x 3 x 0.8 / 0.69 ~ 7 W/(m^2 sr)
+}
+
+namespace {
+
+/// The largest angle between a direction and the stored direction whose cell holds it (the
+/// triangle corner whose part holds it, in that corner's orientation). Each part of a cell is
+/// a flat quadrilateral (corner, edge midpoint, chord centroid, edge midpoint) seen from the
+/// centre, and the directions within an angle under 90 degrees of the corner form a convex
+/// cone, whose section by the quadrilateral's plane is convex: the part's farthest direction
+/// is one of its vertices.
+double largestCellAngle(const DirectionSet& set) {
+    double worst = 0.0;
+    for (std::uint32_t t = 0; t < set.triangleCount(); ++t) {
+        std::array<glm::dvec3, 3> p;
+        for (std::size_t k = 0; k < 3; ++k) {
+            const OrientedDirection& c = set.triangle(t)[k];
+            p[k] = double(c.sign) * glm::dvec3(set.direction(c.index));
+        }
+        const glm::dvec3 centroid = (p[0] + p[1] + p[2]) / 3.0;
+        for (std::size_t k = 0; k < 3; ++k)
+            for (const glm::dvec3& q :
+                 {centroid, 0.5 * (p[k] + p[(k + 1) % 3]), 0.5 * (p[k] + p[(k + 2) % 3])})
+                worst = std::max(worst,
+                                 std::atan2(glm::length(glm::cross(p[k], q)), glm::dot(p[k], q)));
+    }
+    return worst;
+}
+
+} // namespace
+
+TEST(VlfBake, GlossyLightReachesADiffuseCeiling) {
+    // A glossy floor [-0.5, 0.5]^2 (k_s 0.6, n_s 20, no diffuse part) in a sun 45 degrees off
+    // the vertical, and 1 m above it a ceiling facing down, which the sun does not light (it
+    // faces away) and whose shadow falls beyond the floor's cells. After the direct pass every
+    // floor cell holds, for its stored direction o, the lobe
+    //   L(o) = k_s (n + 2) / (2 pi) cos^n(alpha) E_sun cos 45,  alpha between o and the sun's
+    // mirror direction (GlossyDirectPassIsThePhongLobeOfAPointLight checks it cell by cell),
+    // the same at every cell, as the sun is. The pass that follows sends it on: the ceiling's
+    // irradiance at x is the integral over the floor of L(y -> x) cos cos / d^2 dA_y. Over the
+    // horizontal offset D from a floor point to a ceiling point, the mean over a texel T is
+    //   E_T = integral of L(w) H^2 / d^4 V_T(D) dD,  w = (D_x, H, D_z) / d, d = |(D_x, H, D_z)|,
+    // with V_T(D) the fraction of T that lies over the floor shifted by D (cos = H / d at both
+    // ends, dA dA' / A_T over the pairs at offset D is V_T dD).
+    //
+    // With the same lobe in every cell, where a line meets the floor does not matter: the
+    // bake's one approximation here is the direction. A line along a jittered direction w of
+    // stored direction j's cell carries L(o_j), o_j in the orientation of the cell's part that
+    // holds w; lines and directions are uniform within their cells, so the bake's expected
+    // texel value is E_T with L(w) replaced by L(o(w)), o(w) the corner of the triangle around
+    // w with the largest barycentric weight (a corner's part of a chord triangle is where its
+    // weight is the largest). That is checked within statistics, which also tells a wrong
+    // scale of the light sent. Against the continuum: every direction lies within delta
+    // (largestCellAngle) of its stored direction and the lobe falls with alpha, so the
+    // expected value lies between E_T with L at alpha + delta (and none within delta of the
+    // floor's horizon, where the stored direction may lie below it) and at max(alpha - delta,
+    // 0): the tolerance, first order in delta. Each level halves the triangles' edges, so
+    // delta and the tolerance halve (to first order; below 0.6 of the coarser level's here).
+    // The lobe's axis lies in the plane z = 0, the direction set's equator: half the light
+    // travels along directions below it, which the set holds reversed.
+    test::VlfSceneBuilder b;
+    const double ks = 0.6, ns = 20.0, sunE = 3.0, H = 1.0, half = 0.5;
+    const std::uint32_t glossy =
+        b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(float(ks)), float(ns));
+    b.quad({-.5f, 0.f, -.5f}, {-.5f, 0.f, .5f}, {.5f, 0.f, .5f}, {.5f, 0.f, -.5f}, glossy);
+    // The ceiling's shadow starts at x = 0.8: 0.3 m beyond the floor, more than the farthest
+    // point of a floor cell a line to the ceiling reads (half a cell diagonal, 6 cm, over the
+    // sine of the stored direction's elevation, 21 degrees at least less delta: 0.22 m).
+    b.quad({-.2f, 1.f, -.6f}, {1.8f, 1.f, -.6f}, {1.8f, 1.f, .6f}, {-.2f, 1.f, .6f},
+           b.material(glm::vec3(0.5f)));
+    PunctualLight sun;
+    sun.kind = PunctualLight::Kind::Directional;
+    sun.intensity = glm::vec3(float(sunE));
+    sun.axis = glm::normalize(glm::vec3(1.f, -1.f, 0.f));
+    b.lights.push_back(sun);
+    const auto scene = b.build();
+    const int ceiling = test::findFace(*scene, {0.f, -1.f, 0.f}, {0.f, 1.f, 0.f});
+    ASSERT_GE(ceiling, 0);
+    const glm::dvec3 normal(0.0, 1.0, 0.0), from = -glm::dvec3(sun.axis);
+    const glm::dvec3 mirror = 2.0 * glm::dot(normal, from) * normal - from;
+    const double peak = ks * (ns + 2.0) / (2.0 * glm::pi<double>()) * sunE * glm::dot(normal, from);
+    const auto lobe = [&](double cosAlpha) {
+        return cosAlpha > 0.0 ? peak * std::pow(cosAlpha, ns) : 0.0;
+    };
+    // Ceiling texels (a third of a metre wide) under the highlight, past the far corner of the
+    // floor's mirror image and short of its near edge (the lobe's tails).
+    const std::array<glm::vec2, 3> probes{glm::vec2(1.f, 0.15f), glm::vec2(1.6f, 0.45f),
+                                          glm::vec2(0.3f, -0.45f)};
+    struct Integrals {
+        double exact = 0.0, discrete = 0.0, low = 0.0, high = 0.0;
+    };
+    // E_T four ways (the continuous lobe, the bake's stored directions, the two bounds), by
+    // the midpoint rule on a 256 x 256 grid over the offsets, shifted by (su, sv) cells.
+    const auto integrate = [&](const DirectionSet& set, double delta, const glm::dvec3& lo,
+                               const glm::dvec3& hi, double su, double sv) {
+        constexpr int kGrid = 256;
+        const double area = (hi.x - lo.x) * (hi.z - lo.z);
+        const double hx = (hi.x - lo.x + 2.0 * half) / kGrid,
+                     hz = (hi.z - lo.z + 2.0 * half) / kGrid;
+        std::vector<Integrals> rows(kGrid);
+        tbb::parallel_for(0, kGrid, [&](int i) {
+            const double dx = lo.x - half + (i + su) * hx;
+            const double ox = std::min(hi.x, dx + half) - std::max(lo.x, dx - half);
+            Integrals& r = rows[std::size_t(i)];
+            for (int k = 0; k < kGrid && ox > 0.0; ++k) {
+                const double dz = lo.z - half + (k + sv) * hz;
+                const double oz = std::min(hi.z, dz + half) - std::max(lo.z, dz - half);
+                if (oz <= 0.0) continue;
+                const double d2 = dx * dx + H * H + dz * dz;
+                const double w = H * H / (d2 * d2) * ox * oz / area * hx * hz;
+                const glm::dvec3 omega = glm::dvec3(dx, H, dz) / std::sqrt(d2);
+                const double cosA = glm::dot(omega, mirror);
+                const double alpha = std::acos(std::clamp(cosA, -1.0, 1.0));
+                r.exact += w * lobe(cosA);
+                r.high += w * lobe(std::cos(std::max(alpha - delta, 0.0)));
+                if (omega.y > std::sin(delta)) r.low += w * lobe(std::cos(alpha + delta));
+                const DirectionTriangle tri = set.locate(glm::vec3(omega));
+                const OrientedDirection& c = tri.corners[std::size_t(
+                    std::max_element(tri.weights.begin(), tri.weights.end()) -
+                    tri.weights.begin())];
+                const glm::dvec3 o = double(c.sign) * glm::dvec3(set.direction(c.index));
+                if (glm::dot(o, normal) > 0.0) r.discrete += w * lobe(glm::dot(o, mirror));
+            }
+        });
+        Integrals sum;
+        for (const Integrals& r : rows) { // fixed order: the same sums on every run
+            sum.exact += r.exact;
+            sum.discrete += r.discrete;
+            sum.low += r.low;
+            sum.high += r.high;
+        }
+        return sum;
+    };
+    // Level 4 (the default) and 5. Each seed's bake is an independent unbiased estimate, and
+    // so is its quadrature, on a grid shifted at random (every grid cell then sampled
+    // uniformly): the differences are independent with mean 0, and their t-test covers the
+    // quadrature's error too. Level 4 bakes are cheap (the lobe tables grow as the square of
+    // the directions), so they take four jittered directions per subfield. Two-sided Student
+    // t quantiles at 1e-3 for the seeds' count.
+    struct Level {
+        int level, jitterSamples, seeds;
+        double t;
+    };
+    std::array<double, 3> previousWidth{};
+    for (const Level& lv : {Level{4, 4, 8, 5.408}, Level{5, 1, 6, 6.869}}) {
+        VlfSettings s;
+        s.directionLevel = lv.level;
+        s.linesPerSide = 32;
+        s.tileSize = 8;
+        s.iterations = 1;
+        s.jitterSamples = lv.jitterSamples;
+        s.texelCells = 4.f;
+        s.filterSigma = 0.f;
+        s.glossyCutoff = 0.99f; // the gather after the pass, which this test does not read
+        std::vector<std::vector<double>> baked(probes.size()), paired(probes.size());
+        std::vector<Integrals> mean(probes.size());
+        double delta = 0.0;
+        for (int seed = 1; seed <= lv.seeds; ++seed) {
+            s.seed = std::uint64_t(seed);
+            const Vlf v = bakeVlf(*scene, s);
+            delta = largestCellAngle(v.directions());
+            std::mt19937 shifts{std::uint32_t(seed)};
+            std::uniform_real_distribution<double> unit(0.0, 1.0);
+            const FaceMap& m = v.faceMaps()[std::size_t(ceiling)];
+            const Face& f = v.faces()[std::size_t(ceiling)];
+            for (std::size_t p = 0; p < probes.size(); ++p) {
+                const std::uint32_t t =
+                    v.texelAt(std::uint32_t(ceiling), glm::vec3(probes[p].x, 1.f, probes[p].y));
+                const glm::dvec3 centre(v.texelCenter(std::uint32_t(ceiling),
+                                                      (t - m.firstTexel) % m.width,
+                                                      (t - m.firstTexel) / m.width));
+                const glm::dvec3 h = 0.5 * glm::dvec3(m.texelU * f.axisU + m.texelV * f.axisV);
+                const double su = unit(shifts), sv = unit(shifts);
+                const Integrals q =
+                    integrate(v.directions(), delta, glm::min(centre - h, centre + h),
+                              glm::max(centre - h, centre + h), su, sv);
+                // The ceiling's whole irradiance: the sun does not reach it.
+                const double E = v.irradiance()[t].x;
+                baked[p].push_back(E);
+                paired[p].push_back(E - q.discrete);
+                mean[p].exact += q.exact / lv.seeds;
+                mean[p].discrete += q.discrete / lv.seeds;
+                mean[p].low += q.low / lv.seeds;
+                mean[p].high += q.high / lv.seeds;
+            }
+        }
+        for (std::size_t p = 0; p < probes.size(); ++p) {
+            const auto [bakedMean, bakedSe] = sampleMean(baked[p]);
+            const auto [difference, differenceSe] = sampleMean(paired[p]);
+            const Integrals& q = mean[p];
+            std::printf("level %d probe %zu: baked %.4f +- %.4f, stored directions %.4f, "
+                        "continuum %.4f in [%.4f, %.4f] (delta %.4f rad)\n",
+                        lv.level, p, bakedMean, bakedSe, q.discrete, q.exact, q.low, q.high, delta);
+            // What the bake sends is the floor's lobe at its stored directions ...
+            EXPECT_NEAR(difference, 0.0, lv.t * differenceSe)
+                << "level " << lv.level << " probe " << p;
+            // ... which is the continuous lobe within the discretisation's bounds.
+            EXPECT_GE(bakedMean, q.low - lv.t * bakedSe) << "level " << lv.level << " probe " << p;
+            EXPECT_LE(bakedMean, q.high + lv.t * bakedSe) << "level " << lv.level << " probe " << p;
+            // The noise is inside those bounds (measured: a tenth to three quarters of their
+            // half-width), and under the highlight it tells a tenth of the light lost or added.
+            EXPECT_LT(lv.t * bakedSe, 0.5 * (q.high - q.low)) << "precise enough to test";
+            if (p == 0) {
+                EXPECT_LT(lv.t * differenceSe, 0.1 * q.discrete) << "precise enough to test";
+            }
+            if (previousWidth[p] > 0.0) {
+                EXPECT_LT(q.high - q.low, 0.6 * previousWidth[p]) << "probe " << p;
+            }
+            previousWidth[p] = q.high - q.low;
+        }
+    }
 }
 
 TEST(VlfBake, SpotAndDirectionalLightsDirectPass) {
