@@ -27,6 +27,12 @@ struct ShProbeSettings {
     std::uint32_t updateBudget = 16;
     /// Probes within this distance of a change (a delta segment's end point, the old or new
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.
+    /// This localises the marking; it bounds no error. It is measured from end points, while a
+    /// vertex's new irradiance spreads over its triangles (0.5 m legs where this is 1 m in the
+    /// test below), so a probe left alone can still see changed surfaces near it. What holds is
+    /// exact accounting: along a ray that meets no moved mobile, a stale probe's radiance is off
+    /// by albedo / pi x the change of the hit triangle's vertex irradiance, at most its largest
+    /// vertex change (tests/unit/test_sh_probes.cpp, ProbesLeftUnmarkedAfterAPhotonDelta...).
     float influenceDistance = 0.f;
     /// A half-spacing cell of the lattice needs this many end points of PhotonDelta segments
     /// (counted over frames until it marks, then from zero again; counts halve every 32
@@ -39,7 +45,13 @@ struct ShProbeSettings {
     /// A moved mobile also marks the probes it can cover at least this share of (the sphere of
     /// directions) by its bounding sphere of radius rho: those within rho / (2 sqrt(share)) of
     /// its old or new bounds (at 0.01, five radii). A mobile in view of a farther probe changes
-    /// its projection by less than this share of the radiance difference it makes.
+    /// its projection by less than this share of the radiance difference it makes, on average
+    /// over the rays' rotations. One projection counts rays, not solid angle: a mobile however
+    /// small can catch one of the raysPerProbe rays (1/64 of the sphere at 64), and a cap of
+    /// this share up to N of them (N = 2 of 64), so per probe and pose the bound is
+    /// N / raysPerProbe of 4 pi times the largest radiance in view, times the largest |Y_i| for
+    /// coefficient i. (In that test one ray of 64 meeting the cube 4 m away moves a dimly lit
+    /// probe's irradiance by 16 %.)
     float mobileSolidAngleShare = 0.01f;
     /// Visibility lattice points per cell edge: an avatar's weight for each corner probe is the
     /// trilinear blend of whether the probe is visible from the lattice points around it.
