@@ -24,6 +24,8 @@ void validate(const ShProbeSettings& s) {
         fail("ShProbeSettings.backFaceShare = ", s.backFaceShare, ": must be in (0, 1]");
     if (s.updateBudget > (1u << 24))
         fail("ShProbeSettings.updateBudget = ", s.updateBudget, ": must be at most 2^24");
+    if (s.sweepPerFrame > (1u << 24))
+        fail("ShProbeSettings.sweepPerFrame = ", s.sweepPerFrame, ": must be at most 2^24");
     if (!std::isfinite(s.influenceDistance) || s.influenceDistance < 0.f)
         fail("ShProbeSettings.influenceDistance = ", s.influenceDistance,
              ": must be a finite number of metres >= 0 (0: twice the spacing)");

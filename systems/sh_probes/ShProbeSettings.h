@@ -25,6 +25,14 @@ struct ShProbeSettings {
     /// Stale probes re-projected per frame at most, nearest to an avatar first. The frame
     /// profiler's "sh.probes" entry shows what this costs.
     std::uint32_t updateBudget = 16;
+    /// Probes re-projected a frame besides the stale ones, whether or not anything marked them,
+    /// in index order and round again: every probe that is not waiting as stale is
+    /// re-projected at least once every probeCount / sweepPerFrame frames, so what the marking
+    /// rules below let through (a ray that meets a mobile far away, a surface lit anew beyond
+    /// influenceDistance) is put right within that time. A probe's rays are fixed by (seed, probe),
+    /// so re-projecting one whose view did not change gives it the same coefficients bit for bit.
+    /// 0: only marked probes.
+    std::uint32_t sweepPerFrame = 2;
     /// Probes within this distance of a change (a delta segment's end point, the old or new
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.
     /// This localises the marking; it bounds no error. It is measured from end points, while a

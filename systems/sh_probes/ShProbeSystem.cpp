@@ -122,6 +122,7 @@ void ShProbeSystem::build(Registry& registry) {
     mEnvironment = isFinite(info->environment) ? info->environment : glm::vec3(0.f);
     mStale.assign(mVolume->probeCount(), 0);
     mStaleCount = 0;
+    mSweepCursor = 0;
     mLightSet = lightSetSignature(registry);
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
     mFineTouched.clear(); // end points counted from the next delta on
@@ -627,6 +628,20 @@ void ShProbeSystem::chooseRefresh(const Registry& registry) {
     mRefresh.assign(mCandidates.begin(), cut);
 }
 
+void ShProbeSystem::sweep() {
+    // Stale probes are left to the budget (those chosen this frame are among them), so the
+    // sweep never doubles one up; it visits sweepPerFrame probes a frame, stale or not.
+    const auto count = std::uint32_t(mStale.size());
+    const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
+    for (std::uint32_t k = 0; k < visits; ++k) {
+        const std::uint32_t p = mSweepCursor;
+        mSweepCursor = mSweepCursor + 1 == count ? 0 : mSweepCursor + 1;
+        if (mStale[p]) continue;
+        mRefresh.push_back(p);
+        ++mStats.swept;
+    }
+}
+
 // ---- avatars -----------------------------------------------------------------------------------
 
 void ShProbeSystem::computeVisibility(std::uint32_t cell, ProbeVolume& volume) const {
@@ -750,6 +765,7 @@ void ShProbeSystem::update(Registry& registry, const FrameContext&) {
             markChanges(registry);
             mStats.staleBefore = mStaleCount;
             chooseRefresh(registry);
+            sweep();
             projectProbes(registry, mRefresh);
             mStats.refreshed = mRefresh.size();
         }

@@ -58,7 +58,10 @@ class RayScene;
  *   - all of them when the delta is full, a punctual light changed or moved, or a Material
  *     changed;
  *  and re-project at most updateBudget stale probes a frame, nearest (in cells) to an avatar
- *  first, ties by index. An unchanged scene re-projects nothing.
+ *  first, ties by index; and sweepPerFrame more that are not stale, round robin over the
+ *  volume, so whatever the marking rules let through is put right within
+ *  probeCount / sweepPerFrame frames. An unchanged scene re-projects the swept probes only,
+ *  which get the same coefficients again.
  *
  *  Avatars (every frame): the radiance SH at the avatar's origin (WorldTransform translation)
  *  from ProbeVolume::interpolate: trilinear weights, zero for disabled probes and for probes
@@ -82,6 +85,7 @@ public:
         std::size_t markedStale = 0;     ///< probes newly marked stale this frame
         std::size_t staleBefore = 0;     ///< stale probes before this frame's refresh
         std::size_t refreshed = 0;       ///< probes re-projected this frame
+        std::size_t swept = 0;           ///< of them, probes not marked stale (sweepPerFrame)
         std::size_t staleAfter = 0;      ///< stale probes left for later frames
         std::size_t visibilityCells = 0; ///< cell visibility masks computed this frame
         std::size_t avatars = 0;         ///< avatars written
@@ -160,6 +164,8 @@ private:
     void markNearBox(const Aabb& box, float radius);
     void markChanges(const Registry& registry);
     void chooseRefresh(const Registry& registry);
+    /// Appends the next sweepPerFrame probes round robin that are not stale to mRefresh.
+    void sweep();
 
     ShProbeSettings mSettings;
     float mSpacing = 0.f;
@@ -172,6 +178,7 @@ private:
     std::unordered_map<Entity, Mobile> mMobiles;
     std::vector<std::uint8_t> mStale;
     std::size_t mStaleCount = 0;
+    std::uint32_t mSweepCursor = 0; ///< next probe the sweep re-projects
     FrameStats mStats;
 
     // Snapshot of the scene the projection reads (rebuilt before each projection batch).

@@ -118,6 +118,7 @@ TEST(ShProbes, AbsurdSettingsAreRejected) {
     rejects([](ShProbeSettings& s) { s.visibilitySubdivisions = 1000; });
     rejects([](ShProbeSettings& s) { s.mobileSolidAngleShare = 0.f; });
     rejects([](ShProbeSettings& s) { s.updateBudget = 1u << 30; });
+    rejects([](ShProbeSettings& s) { s.sweepPerFrame = 1u << 30; });
     rejects([](ShProbeSettings& s) { s.maxProbes = 0; });
     rejects([](ShProbeSettings& s) { s.minDeltaEndPoints = 0; });
     EXPECT_NO_THROW(ShProbeSystem{ShProbeSettings{}});
@@ -1091,9 +1092,11 @@ struct MobileRoom {
     std::unique_ptr<PhotonUpdateSystem> photonSystem;
     std::unique_ptr<DetpIrradianceSystem> detp;
     ShProbeSystem system;
+    /// `sweep`: ShProbeSettings::sweepPerFrame; 0 (the tests of the marking rules) leaves
+    /// every probe nothing marked as it was.
     explicit MobileRoom(std::uint32_t budget, std::uint32_t minDeltaEndPoints = 4,
-                        std::uint32_t photons = 0)
-        : system(settings(budget, minDeltaEndPoints)) {
+                        std::uint32_t photons = 0, std::uint32_t sweep = 0)
+        : system(settings(budget, minDeltaEndPoints, sweep)) {
         floor =
             addMesh(world, test::gridMesh({-3.f, 0.f, 3.f}, {6.f, 0.f, 0.f}, {0.f, 0.f, -6.f}, 12),
                     glm::mat4(1.f), grey(0.5f), false, "floor");
@@ -1125,8 +1128,10 @@ struct MobileRoom {
         system.build(world);
         frame(0);
     }
-    static ShProbeSettings settings(std::uint32_t budget, std::uint32_t minDeltaEndPoints) {
+    static ShProbeSettings settings(std::uint32_t budget, std::uint32_t minDeltaEndPoints,
+                                    std::uint32_t sweep) {
         ShProbeSettings s;
+        s.sweepPerFrame = sweep;
         s.minDeltaEndPoints = minDeltaEndPoints;
         s.spacing = 0.5f;
         s.raysPerProbe = 64;
@@ -1566,6 +1571,60 @@ int mostDirectionsInACap(std::uint32_t n, double theta) {
         }
     }
     return most;
+}
+
+TEST(ShProbes, TheSweepReprojectsEveryProbeAndChangesNoneOfAnUnchangedScene) {
+    // 7 a frame over the room's probes, in index order and round again past the last (a
+    // little over one round here): the k-th visit is probe k mod count. An unchanged scene
+    // keeps every coefficient bit for bit (a probe's rays are fixed).
+    MobileRoom room(16, 4, 0, 7);
+    const std::vector<sh::ShRgb> before = room.probes();
+    const std::size_t count = before.size();
+    std::vector<int> visits(count, 0);
+    const std::size_t frames = count / 7 + 2;
+    for (std::size_t f = 1; f <= frames; ++f) {
+        room.frame(f);
+        const ShProbeSystem::FrameStats& stats = room.system.lastFrame();
+        EXPECT_EQ(stats.markedStale, 0u);
+        EXPECT_EQ(stats.swept, 7u);
+        EXPECT_EQ(stats.refreshed, 7u);
+        for (const std::uint32_t p : room.system.lastRefreshed())
+            ++visits[p];
+    }
+    for (std::size_t p = 0; p < count; ++p)
+        EXPECT_EQ(visits[p], p < 7 * frames - count ? 2 : 1) << "probe " << p;
+    const std::vector<sh::ShRgb> after = room.probes();
+    for (std::size_t p = 0; p < count; ++p)
+        EXPECT_TRUE(sameSh(before[p], after[p])) << "probe " << p;
+}
+
+TEST(ShProbes, TheSweepPutsRightWhatTheMarkingRulesLetThrough) {
+    // The scene of the test below: after the cube's push, once nothing is stale and the
+    // sweep has gone round the volume once more, every probe equals a fresh projection of the
+    // final state bit for bit: incremental equals full, with no bound left to state.
+    constexpr std::uint32_t kSweep = 16;
+    MobileRoom room(16, 4, 200'000, kSweep);
+    Registry& world = room.world;
+    room.moveCube({-1.2f, 0.3f, 0.f}, 1);
+    ASSERT_FALSE(world.ctx().get<PhotonDelta>().paths.empty());
+    std::uint64_t frame = 1;
+    while (room.system.staleCount() > 0) {
+        ASSERT_LT(frame, 100u) << "the budget never drains";
+        room.frame(++frame);
+    }
+    const std::size_t count = room.probes().size();
+    for (std::size_t swept = 0; swept < count;) {
+        ASSERT_LT(frame, 1000u) << "the sweep does not go round";
+        room.frame(++frame);
+        ASSERT_TRUE(world.ctx().get<PhotonDelta>().empty()) << "frame " << frame;
+        ASSERT_EQ(room.system.staleCount(), 0u);
+        swept += room.system.lastFrame().swept;
+    }
+    const std::vector<sh::ShRgb> kept = room.probes();
+    room.system.projectAll(world);
+    const std::vector<sh::ShRgb> fresh = room.probes();
+    for (std::size_t p = 0; p < count; ++p)
+        EXPECT_TRUE(sameSh(kept[p], fresh[p])) << "probe " << p;
 }
 
 TEST(ShProbes, ProbesLeftUnmarkedAfterAPhotonDeltaDifferOnlyByWhatTheRulesLetThrough) {
