@@ -160,8 +160,8 @@ std::vector<glm::vec3> avatarPositions(std::size_t count) {
     return out;
 }
 
-/// What the marking rules leave behind: the cart moves 10 cm a frame for 40 frames with an
-/// unlimited budget, so every probe marked stale is refreshed at once; then each probe is
+/// What the marking rules leave behind, the sweep off: the cart moves 10 cm a frame for 40 frames
+/// with an unlimited budget, so every probe marked stale is refreshed at once; then each probe is
 /// projected afresh with the same rays. A probe still differing was never marked: the
 /// mobile was only in view of it (under mobileSolidAngleShare of its sphere), or the
 /// per-vertex irradiance it sees changed by fewer delta end points than minDeltaEndPoints.
@@ -172,6 +172,7 @@ void StaleResidual(benchmark::State& state) {
     BenchWorld& w = world(true);
     ShProbeSettings settings = w.probes->settings();
     settings.updateBudget = 1u << 24; // more than the volume holds
+    settings.sweepPerFrame = 0;       // the rules alone
     ShProbeSystem probes(settings);
     probes.build(w.registry);
     probes.update(w.registry, FrameContext{});
