@@ -22,17 +22,18 @@ struct ShProbeSettings {
     /// A probe whose rays hit back faces in more than this share is inside geometry: disabled,
     /// it never contributes to an avatar.
     float backFaceShare = 0.25f;
-    /// Stale probes re-projected per frame at most, nearest to an avatar first. The frame
-    /// profiler's "sh.probes" entry shows what this costs.
+    /// Stale probes re-projected per frame at most, nearest to an avatar first (0: stale probes
+    /// wait for the sweep below). The frame profiler's "sh.probes" entry shows what this costs.
     std::uint32_t updateBudget = 16;
-    /// Probes re-projected a frame besides the stale ones, whether or not anything marked them,
-    /// in index order and round again: every probe that is not waiting as stale is
-    /// re-projected at least once every probeCount / sweepPerFrame frames, so what the marking
+    /// Probes a sweep visits a frame, in index order and round again, re-projecting each one
+    /// the budget did not choose, whether or not anything marked it: every probe is projected
+    /// afresh at least once every ceil(probeCount / sweepPerFrame) frames. What the marking
     /// rules below let through (a ray that meets a mobile far away, a surface lit anew beyond
-    /// influenceDistance) is put right within that time. A probe's rays are fixed by (seed, probe),
-    /// so re-projecting one whose view did not change gives it the same coefficients bit for bit.
-    /// 0: only marked probes. At 4 on the atrium (1,536 probes, 256 rays, about 75 us a
-    /// projection on 2 cores): 0.3 ms a frame, a round in 384 frames.
+    /// influenceDistance) is put right within that time, and so is a stale probe far from the
+    /// avatars that the budget, busy nearer them, keeps passing over. A probe's rays are fixed
+    /// by (seed, probe), so re-projecting one whose view did not change gives it the same
+    /// coefficients bit for bit. 0: marked probes only, chosen by the budget. At 4 on the atrium
+    /// (1,536 probes, 256 rays): a round in 384 frames (costs in docs/BENCHMARKS.md).
     std::uint32_t sweepPerFrame = 4;
     /// Probes within this distance of a change (a delta segment's end point, the old or new
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.

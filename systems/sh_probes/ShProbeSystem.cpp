@@ -462,7 +462,17 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         std::exchange(mLightSet, lights) != lights)
         all = true; // one removed, or (un)tagged a stand-in
 
+    // A delta seen before (the photon update skipped a frame) has nothing new; after one
+    // missed, what changed is unknown: everything is marked. Hand-made deltas (sequence 0) are
+    // always new.
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
+    if (delta && delta->sequence != 0) {
+        const std::uint64_t last = std::exchange(mLastSequence, delta->sequence);
+        if (delta->sequence == last)
+            delta = nullptr;
+        else if (last != 0 && delta->sequence != last + 1)
+            all = true;
+    }
     if (delta && delta->full) all = true;
     if (all) {
         markAllStale();
@@ -629,16 +639,22 @@ void ShProbeSystem::chooseRefresh(const Registry& registry) {
 }
 
 void ShProbeSystem::sweep() {
-    // Stale probes are left to the budget (those chosen this frame are among them), so the
-    // sweep never doubles one up; it visits sweepPerFrame probes a frame, stale or not.
+    // The sweep visits sweepPerFrame probes a frame and takes every one the budget did not
+    // choose this frame, stale or not: a stale probe far from every avatar would otherwise wait
+    // for as long as changes near the avatars fill the budget. The budget's choices are tagged
+    // so that none is projected twice (projectProbes clears the tag with the stale flag).
     const auto count = std::uint32_t(mStale.size());
+    if (mSweepCursor >= count) mSweepCursor = 0;
+    for (const std::uint32_t p : mRefresh)
+        mStale[p] = kChosen;
     const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
     for (std::uint32_t k = 0; k < visits; ++k) {
         const std::uint32_t p = mSweepCursor;
         mSweepCursor = mSweepCursor + 1 == count ? 0 : mSweepCursor + 1;
-        if (mStale[p]) continue;
+        if (mStale[p] == kChosen) continue;
         mRefresh.push_back(p);
         ++mStats.swept;
+        if (!mStale[p]) ++mStats.sweptFresh;
     }
 }
 
@@ -754,6 +770,9 @@ void ShProbeSystem::update(Registry& registry, const FrameContext&) {
     {
         FrameProfiler::Scope scope(profiler, "refresh");
         if (!mProjected) {
+            // The projection sees what the current delta changed.
+            if (const PhotonDelta* delta = registry.ctx().find<PhotonDelta>())
+                mLastSequence = delta->sequence;
             projectAll(registry);
             mStats.full = true;
             mStats.refreshed = mVolume->probeCount();

@@ -45,7 +45,8 @@ class RayScene;
  *
  *  Following the scene (update()): the first update projects every probe. Later frames mark
  *  probes stale
- *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments,
+ *   - within influenceDistance of the end points (hits) of this frame's PhotonDelta segments
+ *     (each delta read once, by PhotonDelta::sequence),
  *     old and new, the only places where per-vertex irradiance can have changed, wherever
  *     minDeltaEndPoints of them have fallen in one half-spacing cell (over this and earlier
  *     frames, since the cell last marked; counts halve every 32 frames);
@@ -55,13 +56,15 @@ class RayScene;
  *     (what it hides, shows or bleeds onto changed; the visibility masks of cells it
  *     overlaps are dropped); in photon mode also the probes whose shadow ray to a light
  *     crosses those bounds (their own direct light changed);
- *   - all of them when the delta is full, a punctual light changed or moved, or a Material
- *     changed;
+ *   - all of them when the delta is full or one was missed (its sequence skipped), a
+ *     punctual light changed or moved, or a Material changed;
  *  and re-project at most updateBudget stale probes a frame, nearest (in cells) to an avatar
- *  first, ties by index; and sweepPerFrame more that are not stale, round robin over the
- *  volume, so whatever the marking rules let through is put right within
- *  probeCount / sweepPerFrame frames. An unchanged scene re-projects the swept probes only,
- *  which get the same coefficients again.
+ *  first, ties by index; besides them a sweep visits sweepPerFrame probes round robin over the
+ *  volume and re-projects each one the budget did not choose, stale or not, so every probe is
+ *  projected afresh within ceil(probeCount / sweepPerFrame) frames: whatever the marking rules
+ *  let through is put right in that time, and so is a stale probe far from every avatar that
+ *  the budget keeps passing over. An unchanged scene re-projects the swept probes only, which
+ *  get the same coefficients again.
  *
  *  Avatars (every frame): the radiance SH at the avatar's origin (WorldTransform translation)
  *  from ProbeVolume::interpolate: trilinear weights, zero for disabled probes and for probes
@@ -85,7 +88,8 @@ public:
         std::size_t markedStale = 0;     ///< probes newly marked stale this frame
         std::size_t staleBefore = 0;     ///< stale probes before this frame's refresh
         std::size_t refreshed = 0;       ///< probes re-projected this frame
-        std::size_t swept = 0;           ///< of them, probes not marked stale (sweepPerFrame)
+        std::size_t swept = 0;           ///< of them, added by the sweep (sweepPerFrame)
+        std::size_t sweptFresh = 0;      ///< of those, probes that were not marked stale
         std::size_t staleAfter = 0;      ///< stale probes left for later frames
         std::size_t visibilityCells = 0; ///< cell visibility masks computed this frame
         std::size_t avatars = 0;         ///< avatars written
@@ -164,7 +168,8 @@ private:
     void markNearBox(const Aabb& box, float radius);
     void markChanges(const Registry& registry);
     void chooseRefresh(const Registry& registry);
-    /// Appends the next sweepPerFrame probes round robin that are not stale to mRefresh.
+    /// Visits the next sweepPerFrame probes round robin and appends to mRefresh each one that
+    /// chooseRefresh did not put there.
     void sweep();
 
     ShProbeSettings mSettings;
@@ -176,9 +181,12 @@ private:
     ProbeVolume* mVolume = nullptr;
     glm::vec3 mEnvironment{0.f};
     std::unordered_map<Entity, Mobile> mMobiles;
+    /// Per probe: 0 fresh, 1 stale, kChosen stale and chosen by the budget this frame.
     std::vector<std::uint8_t> mStale;
+    static constexpr std::uint8_t kChosen = 2;
     std::size_t mStaleCount = 0;
-    std::uint32_t mSweepCursor = 0; ///< next probe the sweep re-projects
+    std::uint32_t mSweepCursor = 0;  ///< next probe the sweep visits
+    std::uint64_t mLastSequence = 0; ///< PhotonDelta::sequence last read (0: none)
     FrameStats mStats;
 
     // Snapshot of the scene the projection reads (rebuilt before each projection batch).

@@ -5,6 +5,8 @@
 //  - MovingMobile/<budget>: the system's frame while the cart moves along the east gallery
 //    (the photon update and DETP run untimed before it, 100k photons): stale marking from the
 //    photon delta and the moved bounds, a refresh of at most <budget> probes, the 7 avatars;
+//  - UnchangedScene/<sweep>: the system's frame on a still scene with sweepPerFrame <sweep>:
+//    what the sweep costs when nothing changes;
 //  - StaleResidual: the irradiance error the stale-marking rules leave in the probes they do
 //    not mark while the cart moves (an unlimited budget refreshes every marked probe);
 //  - AvatarLookups/<count>: ProbeVolume::interpolate for <count> avatars spread over the
@@ -121,7 +123,7 @@ void MovingMobile(benchmark::State& state) {
     probes.build(w.registry);
     probes.update(w.registry, FrameContext{});
     w.registry.clearChanges();
-    double marked = 0, refreshed = 0, stale = 0;
+    double marked = 0, refreshed = 0, swept = 0, stale = 0;
     for (auto _ : state) {
         state.PauseTiming();
         w.step(true);
@@ -131,12 +133,14 @@ void MovingMobile(benchmark::State& state) {
         w.registry.clearChanges();
         marked += double(probes.lastFrame().markedStale);
         refreshed += double(probes.lastFrame().refreshed);
+        swept += double(probes.lastFrame().swept);
         stale += double(probes.lastFrame().staleAfter);
         state.ResumeTiming();
     }
     const double n = double(state.iterations());
     state.counters["marked_per_frame"] = marked / n;
     state.counters["refreshed_per_frame"] = refreshed / n;
+    state.counters["swept_per_frame"] = swept / n;
     state.counters["stale_left"] = stale / n;
     // Leave the shared world's probe volume to its own system again.
     w.probes->build(w.registry);
@@ -149,6 +153,34 @@ BENCHMARK(MovingMobile)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(60);
+
+void UnchangedScene(benchmark::State& state) {
+    BenchWorld& w = world(true);
+    ShProbeSettings settings = w.probes->settings();
+    settings.sweepPerFrame = std::uint32_t(state.range(0));
+    ShProbeSystem probes(settings);
+    probes.build(w.registry);
+    probes.update(w.registry, FrameContext{});
+    w.registry.clearChanges();
+    // The shared world's last photon delta is news to a new system: let it settle first.
+    while (probes.staleCount() > 0)
+        probes.update(w.registry, FrameContext{++w.frame, 0.0, 0.f, 0});
+    double refreshed = 0;
+    for (auto _ : state) {
+        probes.update(w.registry, FrameContext{++w.frame, 0.0, 0.f, 0});
+        refreshed += double(probes.lastFrame().refreshed);
+    }
+    state.counters["refreshed_per_frame"] = refreshed / double(state.iterations());
+    w.probes->build(w.registry);
+    w.probes->projectAll(w.registry);
+}
+BENCHMARK(UnchangedScene)
+    ->Arg(0)
+    ->Arg(4)
+    ->Arg(16)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime()
+    ->Iterations(400);
 
 std::vector<glm::vec3> avatarPositions(std::size_t count) {
     // Avatar centres over the ground floor and the upper gallery, 0.875 m above each.

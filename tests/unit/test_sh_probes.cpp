@@ -37,6 +37,7 @@
 #include <map>
 #include <memory>
 #include <random>
+#include <set>
 #include <sstream>
 #include <vector>
 
@@ -1161,7 +1162,7 @@ struct MobileRoom {
     }
 };
 
-TEST(ShProbes, UnchangedSceneRefreshesNothing) {
+TEST(ShProbes, UnchangedSceneRefreshesNothingWithTheSweepOff) {
     MobileRoom room(1000);
     const auto before = room.probes();
     for (std::uint64_t f = 1; f <= 3; ++f) {
@@ -1469,15 +1470,12 @@ TEST(ShProbes, AMobileMovedIntoAnAvatarsCellRecomputesItsVisibility) {
     EXPECT_EQ(masks(), after);
 }
 
-TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
-    // Budget 0: stale probes stay stale, so the marks can be inspected. One end point per
-    // half-cell marks (minDeltaEndPoints = 1); the default 4 would ignore it.
-    MobileRoom room(0, 1);
-    PhotonDelta& delta = room.world.ctx().emplace<PhotonDelta>();
+/// A hand-made delta of one new path: a head that leaves the scene (no end point) and a
+/// bounce ending on the floor at (x, 0, z).
+PhotonDelta oneEndPointDelta(float x, float z, std::uint64_t sequence = 0) {
+    PhotonDelta delta;
     delta.paths = {0};
-    const glm::vec3 end(1.3f, 0.f, 1.1f);
-    // One path: a head that leaves the scene (no end point) and a bounce ending at `end`.
-    delta.newSegments.origin = {glm::vec3(0.f, 1.8f, 0.f), glm::vec3(1.3f, 1.f, 1.1f)};
+    delta.newSegments.origin = {glm::vec3(0.f, 1.8f, 0.f), glm::vec3(x, 1.f, z)};
     delta.newSegments.direction = {glm::vec3(0.f, 1.f, 0.f), glm::vec3(0.f, -1.f, 0.f)};
     delta.newSegments.length = {std::numeric_limits<float>::infinity(), 1.f};
     delta.newSegments.power = {glm::vec3(1.f), glm::vec3(1.f)};
@@ -1486,6 +1484,17 @@ TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
     delta.newSegments.bounce = {0, 1};
     delta.oldFirst = {0, 0};
     delta.newFirst = {0, 2};
+    delta.sequence = sequence;
+    return delta;
+}
+
+TEST(ShProbes, PhotonDeltaEndPointsMarkNearbyProbes) {
+    // Budget 0: stale probes stay stale, so the marks can be inspected. One end point per
+    // half-cell marks (minDeltaEndPoints = 1); the default 4 would ignore it.
+    MobileRoom room(0, 1);
+    const glm::vec3 end(1.3f, 0.f, 1.1f);
+    const PhotonDelta& delta =
+        room.world.ctx().emplace<PhotonDelta>(oneEndPointDelta(end.x, end.z));
     room.system.update(room.world, FrameContext{1});
     const ProbeGrid& grid = room.world.ctx().get<ProbeVolume>().grid();
     const float r = room.system.influenceDistance();
@@ -1573,6 +1582,37 @@ int mostDirectionsInACap(std::uint32_t n, double theta) {
     return most;
 }
 
+TEST(ShProbes, EachPhotonDeltaIsReadOnceAndOneMissedMarksEverything) {
+    // Budget 1000: what is marked is refreshed in the same frame, and markedStale counts it.
+    MobileRoom room(1000, 1);
+    const auto count = room.probes().size();
+    room.world.ctx().emplace<PhotonDelta>(oneEndPointDelta(1.3f, 1.1f, 5));
+    room.frame(1);
+    const std::size_t near = room.system.lastFrame().markedStale;
+    EXPECT_GT(near, 0u);
+    EXPECT_LT(near, count / 4);
+    room.frame(2); // the photon update did not run: the same delta again
+    EXPECT_EQ(room.system.lastFrame().markedStale, 0u);
+    room.world.ctx().get<PhotonDelta>() = oneEndPointDelta(1.3f, 1.1f, 6);
+    room.frame(3);
+    EXPECT_EQ(room.system.lastFrame().markedStale, near);
+    room.world.ctx().get<PhotonDelta>() = oneEndPointDelta(1.3f, 1.1f, 8); // 7 was missed
+    room.frame(4);
+    EXPECT_EQ(room.system.lastFrame().markedStale, count);
+    room.world.ctx().get<PhotonDelta>() = oneEndPointDelta(1.3f, 1.1f); // hand-made: always new
+    room.frame(5);
+    room.frame(6);
+    EXPECT_EQ(room.system.lastFrame().markedStale, near);
+    // A system whose first projection saw delta 9 has nothing new to read in it.
+    ShProbeSystem fresh(MobileRoom::settings(1000, 1, 0));
+    fresh.build(room.world);
+    room.world.ctx().get<PhotonDelta>() = oneEndPointDelta(1.3f, 1.1f, 9);
+    fresh.update(room.world, FrameContext{7});
+    EXPECT_TRUE(fresh.lastFrame().full);
+    fresh.update(room.world, FrameContext{8});
+    EXPECT_EQ(fresh.lastFrame().markedStale, 0u);
+}
+
 TEST(ShProbes, TheSweepReprojectsEveryProbeAndChangesNoneOfAnUnchangedScene) {
     // 7 a frame over the room's probes, in index order and round again past the last (a
     // little over one round here): the k-th visit is probe k mod count. An unchanged scene
@@ -1596,6 +1636,127 @@ TEST(ShProbes, TheSweepReprojectsEveryProbeAndChangesNoneOfAnUnchangedScene) {
     const std::vector<sh::ShRgb> after = room.probes();
     for (std::size_t p = 0; p < count; ++p)
         EXPECT_TRUE(sameSh(before[p], after[p])) << "probe " << p;
+}
+
+/// Follows the sweep's cursor from outside: it starts at probe 0 when the volume is built and
+/// visits min(sweepPerFrame, count) probes a frame, in index order and round again.
+struct SweepTrack {
+    std::uint32_t cursor = 0, perFrame = 0, count = 0;
+    /// The probes the next frame visits.
+    std::set<std::uint32_t> next() {
+        std::set<std::uint32_t> visited;
+        for (std::uint32_t k = 0; k < std::min(perFrame, count); ++k) {
+            visited.insert(cursor);
+            cursor = cursor + 1 == count ? 0 : cursor + 1;
+        }
+        return visited;
+    }
+};
+
+TEST(ShProbes, TheSweepTakesStaleProbesTheBudgetLeavesAndNeverDoublesOne) {
+    // Budget 3, sweep 100 of the room's 576 probes, the cube pushed: a backlog of stale probes
+    // that the sweep meets. Every frame projects exactly the budget's picks (the stale ones
+    // nearest an avatar, here by index) and every probe the sweep visits, each once (a probe
+    // projected twice would be written by two threads at once), and clears the stale flag
+    // of each.
+    constexpr std::uint32_t kBudget = 3, kSweep = 100;
+    MobileRoom room(kBudget, 4, 0, kSweep);
+    const auto count = std::uint32_t(room.probes().size());
+    SweepTrack track{0, kSweep, count};
+    room.moveCube({-1.2f, 0.3f, 0.f}, 1);
+    track.next();
+    std::size_t sweptStale = 0;
+    std::uint64_t f = 1;
+    while (room.system.staleCount() > 0) {
+        ASSERT_LT(f, 100u) << "the backlog never drains";
+        std::vector<std::uint32_t> stale;
+        for (std::uint32_t p = 0; p < count; ++p)
+            if (room.system.isStale(p)) stale.push_back(p);
+        room.frame(++f);
+        const ShProbeSystem::FrameStats& stats = room.system.lastFrame();
+        const std::span<const std::uint32_t> refreshed = room.system.lastRefreshed();
+        const std::size_t chosen = std::min<std::size_t>(kBudget, stale.size());
+        ASSERT_GE(refreshed.size(), chosen);
+        std::set<std::uint32_t> expected(stale.begin(), stale.begin() + std::ptrdiff_t(chosen));
+        const std::set<std::uint32_t> visited = track.next();
+        expected.insert(visited.begin(), visited.end());
+        const std::set<std::uint32_t> got(refreshed.begin(), refreshed.end());
+        EXPECT_EQ(got.size(), refreshed.size()) << "a probe projected twice in frame " << f;
+        EXPECT_EQ(got, expected) << "frame " << f;
+        EXPECT_EQ(stats.refreshed, refreshed.size());
+        EXPECT_EQ(stats.swept, refreshed.size() - chosen);
+        std::size_t staleAfter = stale.size();
+        for (const std::uint32_t p : stale)
+            staleAfter -= got.count(p);
+        EXPECT_EQ(stats.staleAfter, staleAfter) << "frame " << f;
+        for (std::uint32_t p = 0; p < count; ++p)
+            if (got.count(p)) {
+                EXPECT_FALSE(room.system.isStale(p)) << "probe " << p;
+            }
+        sweptStale += stats.swept - stats.sweptFresh;
+    }
+    EXPECT_GT(sweptStale, 0u) << "the sweep never met a stale probe: the test is vacuous";
+}
+
+TEST(ShProbes, TheSweepReachesStaleProbesTheBudgetKeepsPassingOver) {
+    // An avatar at one end of the room and the cube rocking 10 cm beside it every frame: the
+    // budget (4) goes to the probes near the avatar, which the cube marks again and again, and
+    // the probes its first jump marked at the far end wait behind them. The sweep still
+    // projects every probe within each ceil(count / sweepPerFrame) frames.
+    constexpr std::uint32_t kBudget = 4, kSweep = 48;
+    MobileRoom room(kBudget, 4, 0, kSweep);
+    const auto count = std::uint32_t(room.probes().size());
+    const Entity avatar = room.world.create();
+    room.world.emplace<WorldTransform>(avatar, translation({-2.5f, 0.5f, 0.f}));
+    room.world.emplace<Avatar>(avatar);
+    room.moveCube({2.f, 0.3f, 0.f}, 1); // marks probes at the far end
+    const std::uint32_t round = (count + kSweep - 1) / kSweep;
+    std::vector<std::uint64_t> lastProjected(count, 1);
+    std::size_t passedOver = 0; // stale probes the budget left and the sweep took
+    for (std::uint64_t f = 2; f <= 1 + 4 * round; ++f) {
+        room.moveCube({-1.5f + 0.1f * float(f % 2), 0.3f, 0.f}, f);
+        const ShProbeSystem::FrameStats& stats = room.system.lastFrame();
+        passedOver += stats.swept - stats.sweptFresh;
+        for (const std::uint32_t p : room.system.lastRefreshed())
+            lastProjected[p] = f;
+        for (std::uint32_t p = 0; p < count; ++p)
+            ASSERT_LE(f - lastProjected[p], round) << "probe " << p << " in frame " << f;
+    }
+    EXPECT_GT(room.system.staleCount(), 0u) << "the budget kept up: the test is vacuous";
+    EXPECT_GT(passedOver, 0u);
+}
+
+TEST(ShProbes, WithNoBudgetTheSweepAloneRefreshesStaleProbes) {
+    MobileRoom room(0, 4, 0, 50);
+    const auto count = std::uint32_t(room.probes().size());
+    room.moveCube({-1.2f, 0.3f, 0.f}, 1);
+    ASSERT_GT(room.system.staleCount(), 0u);
+    const std::uint32_t round = (count + 49) / 50;
+    for (std::uint64_t f = 2; f <= 1 + round; ++f)
+        room.frame(f);
+    EXPECT_EQ(room.system.staleCount(), 0u);
+}
+
+TEST(ShProbes, TheSweepStartsOverInAVolumeRebuiltSmaller) {
+    // The cursor stands at 500 of 576 when the volume is rebuilt over 2 x 1 x 2 m.
+    MobileRoom room(16, 4, 0, 100);
+    for (std::uint64_t f = 1; f <= 5; ++f)
+        room.frame(f);
+    SceneInfo& info = room.world.ctx().get<SceneInfo>();
+    info.bounds = Aabb{};
+    info.bounds.extend(glm::vec3(-1.f, 0.f, -1.f));
+    info.bounds.extend(glm::vec3(1.f, 1.f, 1.f));
+    room.system.build(room.world);
+    room.frame(6); // the new volume's first projection
+    const auto count = std::uint32_t(room.probes().size());
+    ASSERT_LT(count, 100u);
+    SweepTrack track{0, 100, count};
+    for (std::uint64_t f = 7; f <= 9; ++f) {
+        room.frame(f);
+        const std::span<const std::uint32_t> refreshed = room.system.lastRefreshed();
+        EXPECT_EQ(std::set<std::uint32_t>(refreshed.begin(), refreshed.end()), track.next());
+        EXPECT_EQ(refreshed.size(), count);
+    }
 }
 
 TEST(ShProbes, TheSweepPutsRightWhatTheMarkingRulesLetThrough) {
