@@ -152,11 +152,9 @@ void DetpIrradianceSystem::update(Registry& registry, const FrameContext&) {
     // one missed (DETP skipped a frame) would leave it out: apply each once, re-estimate in
     // full after a gap. Hand-made deltas (sequence 0) are always new.
     static const PhotonDelta kNothingNew;
-    const bool repeated = delta->sequence != 0 && delta->sequence == mLastSequence;
-    const bool gap = delta->sequence != 0 && mLastSequence != 0 && !repeated &&
-                     delta->sequence != mLastSequence + 1;
-    mLastSequence = delta->sequence;
-    if (repeated) delta = &kNothingNew;
+    const PhotonDeltaReader::News news = mDeltaReader.read(*delta);
+    const bool gap = news == PhotonDeltaReader::News::AfterGap;
+    if (news == PhotonDeltaReader::News::Repeated) delta = &kNothingNew;
     collectMovedMobiles(registry, *delta);
     const bool full = delta->full || mNeedsFull || gap;
     mNeedsFull = false;

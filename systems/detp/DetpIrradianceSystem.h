@@ -9,6 +9,7 @@
 #include "systems/detp/ImpactCounter.h"
 #include "systems/detp/PhotonKdTree.h"
 #include "systems/detp/ReceiverSet.h"
+#include "systems/photon_update/PhotonStore.h"
 
 #include <glm/vec3.hpp>
 
@@ -170,7 +171,7 @@ private:
     float mPhotonMapRadius = 0.f;
     bool mBuilt = false;
     bool mNeedsFull = true;
-    std::uint64_t mLastSequence = 0; ///< PhotonDelta::sequence last applied
+    PhotonDeltaReader mDeltaReader;
     FrameStats mStats;
 
     ReceiverSet mReceivers;

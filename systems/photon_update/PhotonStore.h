@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <span>
+#include <utility>
 #include <vector>
 
 namespace qgi {
@@ -135,6 +136,24 @@ struct PhotonDelta {
 
     bool empty() const { return !full && paths.empty() && relabels.empty(); }
     void clear();
+};
+
+/// Reads each PhotonDelta once, by its sequence, for a consumer that applies deltas to sums of
+/// its own: a delta seen before has nothing new (the photon update skipped a frame), and after
+/// one was missed (the consumer skipped a frame) the consumer must re-estimate in full.
+/// Hand-made deltas (sequence 0) are always new.
+class PhotonDeltaReader {
+public:
+    enum class News { Fresh, Repeated, AfterGap };
+    News read(const PhotonDelta& delta) {
+        if (delta.sequence == 0) return News::Fresh;
+        const std::uint64_t last = std::exchange(mLast, delta.sequence);
+        if (delta.sequence == last) return News::Repeated;
+        return last != 0 && delta.sequence != last + 1 ? News::AfterGap : News::Fresh;
+    }
+
+private:
+    std::uint64_t mLast = 0; ///< the sequence last read (0: none)
 };
 
 } // namespace qgi

@@ -289,7 +289,12 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
     mTouched.clear();
     if (store) {
         const StageTimer timer(profiler, "indirect", mStats.indirectMs);
-        const bool full = mNeedsFull || (delta && delta->full);
+        // Each delta is applied once (PhotonDeltaReader); after one missed, in full.
+        const PhotonDeltaReader::News news =
+            delta ? mDeltaReader.read(*delta) : PhotonDeltaReader::News::Fresh;
+        if (news == PhotonDeltaReader::News::Repeated) delta = nullptr;
+        const bool full =
+            mNeedsFull || news == PhotonDeltaReader::News::AfterGap || (delta && delta->full);
         if (full) {
             mStats.fullIndirect = true;
             std::fill(mPowerSum.begin(), mPowerSum.end(), glm::dvec3(0.0));

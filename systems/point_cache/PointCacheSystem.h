@@ -5,6 +5,7 @@
 #include "runtime/ecs/Registry.h"
 #include "systems/detp/DiscCrossing.h"
 #include "systems/detp/DiscIndex.h"
+#include "systems/photon_update/PhotonStore.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/point_cache/PointCacheSettings.h"
 #include "systems/point_cache/PointSetBuilder.h"
@@ -32,7 +33,8 @@ struct PhotonSegments;
  *  world resource.
  *
  *  update(), the `point.cache` schedule entry:
- *   - indirect: when the photon set was (re)built (first frame, PhotonDelta::full) every
+ *   - indirect: when the photon set was (re)built (first frame, PhotonDelta::full) or a
+ *     delta was missed (PhotonDeltaReader: each is applied once, by its sequence) every
  *     point's disc counts every stored segment after its first bounce (DETP, as the vertices'
  *     irradiance); otherwise the delta's old segments are subtracted and its new ones added
  *     (DETP is additive per segment): exact, cheap, and a point no delta segment crosses is
@@ -103,6 +105,7 @@ private:
     bool mLoaded = false;
     bool mBuilt = false;
     bool mNeedsFull = true;
+    PhotonDeltaReader mDeltaReader;
     FrameStats mStats;
     std::vector<AreaLight> mLights;
     std::unique_ptr<DiscIndex> mDiscs;

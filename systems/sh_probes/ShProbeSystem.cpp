@@ -466,12 +466,10 @@ void ShProbeSystem::markChanges(const Registry& registry) {
     // missed, what changed is unknown: everything is marked. Hand-made deltas (sequence 0) are
     // always new.
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
-    if (delta && delta->sequence != 0) {
-        const std::uint64_t last = std::exchange(mLastSequence, delta->sequence);
-        if (delta->sequence == last)
-            delta = nullptr;
-        else if (last != 0 && delta->sequence != last + 1)
-            all = true;
+    if (delta) {
+        const PhotonDeltaReader::News news = mDeltaReader.read(*delta);
+        if (news == PhotonDeltaReader::News::Repeated) delta = nullptr;
+        if (news == PhotonDeltaReader::News::AfterGap) all = true;
     }
     if (delta && delta->full) all = true;
     if (all) {
@@ -772,7 +770,7 @@ void ShProbeSystem::update(Registry& registry, const FrameContext&) {
         if (!mProjected) {
             // The projection sees what the current delta changed.
             if (const PhotonDelta* delta = registry.ctx().find<PhotonDelta>())
-                mLastSequence = delta->sequence;
+                mDeltaReader.read(*delta);
             projectAll(registry);
             mStats.full = true;
             mStats.refreshed = mVolume->probeCount();

@@ -5,6 +5,7 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/math/SphericalHarmonics.h"
 #include "runtime/scene/SceneInfo.h"
+#include "systems/photon_update/PhotonStore.h"
 #include "systems/sh_probes/ProbeVolume.h"
 #include "systems/sh_probes/ShProbeSettings.h"
 
@@ -186,7 +187,7 @@ private:
     static constexpr std::uint8_t kChosen = 2;
     std::size_t mStaleCount = 0;
     std::uint32_t mSweepCursor = 0;  ///< next probe the sweep visits
-    std::uint64_t mLastSequence = 0; ///< PhotonDelta::sequence last read (0: none)
+    PhotonDeltaReader mDeltaReader;
     FrameStats mStats;
 
     // Snapshot of the scene the projection reads (rebuilt before each projection batch).

@@ -823,8 +823,17 @@ TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
         untouched += std::memcmp(&incremental[p], &before[p], sizeof(glm::vec3)) == 0;
     EXPECT_GE(untouched, cache.size() - system.lastFrame().indirectWritten);
 
-    registry.ctx().get<PhotonDelta>().full = true;
+    // The photon update skipped a frame: the same delta again changes nothing.
     system.update(registry, FrameContext{2});
+    EXPECT_FALSE(system.lastFrame().fullIndirect);
+    EXPECT_EQ(system.lastFrame().deltaSegments, 0u);
+    EXPECT_EQ(system.lastFrame().indirectWritten, 0u);
+    EXPECT_EQ(0, std::memcmp(cache.indirect.data(), incremental.data(),
+                             incremental.size() * sizeof(glm::vec3)));
+
+    // A delta missed (the next one's sequence skips one): re-estimated in full.
+    registry.ctx().get<PhotonDelta>().sequence += 2;
+    system.update(registry, FrameContext{3});
     EXPECT_TRUE(system.lastFrame().fullIndirect);
     // Exactly up to the final rounding: the double sums differ by about 2^-53 of their largest
     // partial sum, far below the float's half ulp, so the floats agree to one ulp (2^-23).
