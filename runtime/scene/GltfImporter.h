@@ -1,7 +1,7 @@
 #pragma once
 /** glTF 2.0 import (`importGltf` in SceneLoader.h), through tinygltf.
  *
- *  Mapping (docs: DESIGN.md section 5):
+ *  Mapping (README.md, "Scene conventions"):
  *  - Nodes of the default scene (scene 0 when none is named; every root node when the file has
  *    no scenes) become entities with Name, Transform (a `matrix` is decomposed into TRS) and
  *    WorldTransform (parent world * local), parents before children.

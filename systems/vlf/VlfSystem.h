@@ -20,7 +20,7 @@ struct VlfSystemSettings {
  *  The field is static, so nothing runs per frame: the renderer looks it up per fragment
  *  (shaders/common/vlf.glsl) for glossy and mirror static surfaces.
  *  Reads:  const StaticMesh, const Mesh, const WorldTransform, const Material, const
- *          PointLight / SpotLight (+ LightStandIn), ctx<const SceneInfo>
+ *          PointLight / SpotLight / DirectionalLight (+ LightStandIn), ctx<const SceneInfo>
  *  Writes: ctx<VlfField>                                                                  */
 class VlfSystem {
 public:

@@ -19,7 +19,7 @@ namespace qgi::reference {
  *  checked against. It shares no code with the photon tracer or DETP: only RayScene (Embree is
  *  the ground truth for geometry) and the scene's components.
  *
- *  Physics, as the engine defines it (DESIGN.md section 5):
+ *  Physics, as the engine defines it (README.md, "Scene conventions"):
  *   - every StaticMesh and MobileMesh surface is Lambertian on both sides with albedo
  *     Material::baseColor (textures are not sampled), and emits Material::emission, W/(m^2 sr),
  *     from its front side only (Hit::normal's side: counter-clockwise corners);
