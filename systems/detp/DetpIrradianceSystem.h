@@ -107,12 +107,11 @@ public:
     /// resolves the disc radius and builds the disc indices. Throws qgi::Error on a mesh it
     /// cannot use or a missing resource. (Meshes added or removed later need the photon ray set
     /// rebuilt too: see PhotonUpdateSystem.)
-    /// Each PhotonDelta is applied once (PhotonDelta::sequence); after a missed one every
-    /// vertex is re-estimated.
     void build(Registry& registry);
 
     /// The frame: applies this frame's PhotonDelta (nothing to do while there is no
-    /// PhotonStore/PhotonDelta). Never throws.
+    /// PhotonStore/PhotonDelta). Each delta is applied once (PhotonDeltaReader); after a
+    /// missed one every vertex is re-estimated. Never throws.
     void update(Registry& registry, const FrameContext& frame);
 
     const DetpSettings& settings() const { return mSettings; }

@@ -141,13 +141,16 @@ struct PhotonDelta {
 /// Reads each PhotonDelta once, by its sequence, for a consumer that applies deltas to sums of
 /// its own: a delta seen before has nothing new (the photon update skipped a frame), and after
 /// one was missed (the consumer skipped a frame) the consumer must re-estimate in full.
-/// Hand-made deltas (sequence 0) are always new.
+/// Hand-made deltas (sequence 0) are always new, and so is a full one: re-estimating in full
+/// twice costs time, while skipping one (a PhotonDelta made anew, numbered from 1 again, in a
+/// registry whose consumers read 1 before) would keep sums of a ray set that is gone.
 class PhotonDeltaReader {
 public:
     enum class News { Fresh, Repeated, AfterGap };
     News read(const PhotonDelta& delta) {
         if (delta.sequence == 0) return News::Fresh;
         const std::uint64_t last = std::exchange(mLast, delta.sequence);
+        if (delta.full) return News::Fresh;
         if (delta.sequence == last) return News::Repeated;
         return last != 0 && delta.sequence != last + 1 ? News::AfterGap : News::Fresh;
     }

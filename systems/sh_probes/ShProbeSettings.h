@@ -23,7 +23,8 @@ struct ShProbeSettings {
     /// it never contributes to an avatar.
     float backFaceShare = 0.25f;
     /// Stale probes re-projected per frame at most, nearest to an avatar first (0: stale probes
-    /// wait for the sweep below). The frame profiler's "sh.probes" entry shows what this costs.
+    /// wait for the sweep below; with sweepPerFrame 0 too, the probes are never re-projected). The
+    /// frame profiler's "sh.probes" entry shows what this costs.
     std::uint32_t updateBudget = 16;
     /// Probes a sweep visits a frame, in index order and round again, re-projecting each one
     /// the budget did not choose, whether or not anything marked it: every probe is projected

@@ -639,17 +639,17 @@ void ShProbeSystem::chooseRefresh(const Registry& registry) {
 void ShProbeSystem::sweep() {
     // The sweep visits sweepPerFrame probes a frame and takes every one the budget did not
     // choose this frame, stale or not: a stale probe far from every avatar would otherwise wait
-    // for as long as changes near the avatars fill the budget. The budget's choices are tagged
-    // so that none is projected twice (projectProbes clears the tag with the stale flag).
+    // for as long as changes near the avatars fill the budget. None is taken twice: two
+    // threads would project it at once.
     const auto count = std::uint32_t(mStale.size());
-    if (mSweepCursor >= count) mSweepCursor = 0;
-    for (const std::uint32_t p : mRefresh)
-        mStale[p] = kChosen;
+    if (mSweepCursor >= count) mSweepCursor = 0; // build() resets it; a smaller volume
+    mChosen.assign(mRefresh.begin(), mRefresh.end());
+    std::sort(mChosen.begin(), mChosen.end());
     const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
     for (std::uint32_t k = 0; k < visits; ++k) {
         const std::uint32_t p = mSweepCursor;
         mSweepCursor = mSweepCursor + 1 == count ? 0 : mSweepCursor + 1;
-        if (mStale[p] == kChosen) continue;
+        if (std::binary_search(mChosen.begin(), mChosen.end(), p)) continue;
         mRefresh.push_back(p);
         ++mStats.swept;
         if (!mStale[p]) ++mStats.sweptFresh;

@@ -182,9 +182,8 @@ private:
     ProbeVolume* mVolume = nullptr;
     glm::vec3 mEnvironment{0.f};
     std::unordered_map<Entity, Mobile> mMobiles;
-    /// Per probe: 0 fresh, 1 stale, kChosen stale and chosen by the budget this frame.
-    std::vector<std::uint8_t> mStale;
-    static constexpr std::uint8_t kChosen = 2;
+    std::vector<std::uint8_t> mStale;   ///< per probe
+    std::vector<std::uint32_t> mChosen; ///< sweep(): the budget's choices, sorted
     std::size_t mStaleCount = 0;
     std::uint32_t mSweepCursor = 0;  ///< next probe the sweep visits
     PhotonDeltaReader mDeltaReader;

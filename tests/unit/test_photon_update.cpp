@@ -200,6 +200,29 @@ void expectHitsReproduce(const PhotonStore& store, const RayScene& scene, float 
 
 // ---- determinism -------------------------------------------------------------------------------
 
+TEST(PhotonDeltaReader, ReadsEachDeltaOnceAndSaysWhenOneWasMissed) {
+    using News = PhotonDeltaReader::News;
+    PhotonDeltaReader reader;
+    PhotonDelta delta;
+    const auto read = [&](std::uint64_t sequence, bool full = false) {
+        delta.sequence = sequence;
+        delta.full = full;
+        return reader.read(delta);
+    };
+    EXPECT_EQ(read(1), News::Fresh); // the first one read, whatever its number
+    EXPECT_EQ(read(1), News::Repeated);
+    EXPECT_EQ(read(2), News::Fresh);
+    EXPECT_EQ(read(4), News::AfterGap); // 3 was missed
+    EXPECT_EQ(read(4), News::Repeated);
+    EXPECT_EQ(read(0), News::Fresh); // made by hand: always new, and no number to follow
+    EXPECT_EQ(read(0), News::Fresh);
+    EXPECT_EQ(read(5), News::Fresh);
+    EXPECT_EQ(read(5, true), News::Fresh); // a full one is never skipped
+    EXPECT_EQ(read(1, true), News::Fresh); // a PhotonDelta made anew, numbered from 1
+    EXPECT_EQ(read(2), News::Fresh);
+    EXPECT_EQ(read(2), News::Repeated);
+}
+
 TEST(PhotonUpdate, SameSeedGivesABitIdenticalStoreAnotherSeedDoesNot) {
     const auto shoot = [](Registry& r, std::uint64_t seed) {
         buildRoom(r, kCubeRest, kCrateRest);

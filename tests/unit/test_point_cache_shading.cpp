@@ -831,9 +831,17 @@ TEST(PointCacheUpdate, IndirectFollowsThePhotonDeltaExactly) {
     EXPECT_EQ(0, std::memcmp(cache.indirect.data(), incremental.data(),
                              incremental.size() * sizeof(glm::vec3)));
 
-    // A delta missed (the next one's sequence skips one): re-estimated in full.
-    registry.ctx().get<PhotonDelta>().sequence += 2;
+    // A full delta (the photon set shot anew): re-estimated in full.
+    PhotonDelta& delta = registry.ctx().get<PhotonDelta>();
+    delta.sequence += 1;
+    delta.full = true;
     system.update(registry, FrameContext{3});
+    EXPECT_TRUE(system.lastFrame().fullIndirect);
+    delta.full = false;
+
+    // A delta missed (the next one's sequence skips one): re-estimated in full too.
+    delta.sequence += 2;
+    system.update(registry, FrameContext{4});
     EXPECT_TRUE(system.lastFrame().fullIndirect);
     // Exactly up to the final rounding: the double sums differ by about 2^-53 of their largest
     // partial sum, far below the float's half ulp, so the floats agree to one ulp (2^-23).
