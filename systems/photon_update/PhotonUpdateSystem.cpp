@@ -904,11 +904,12 @@ std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const Photo
         if (!mEdits.empty() && edited(segments.hitEntity[s])) return std::int32_t(k);
         const glm::vec3& o = segments.origin[s];
         const glm::vec3& d = segments.direction[s];
+        const glm::vec3 inverse = 1.f / d; // once for every mobile's box
         const float length = segments.length[s];
         // World box, then the tight object-space box (an affine map keeps t), then the
         // mobile's triangles.
         for (const MovedMobile& m : mMoved) {
-            if (!m.active || !segmentMeetsBox(o, d, length, m.newBox)) continue;
+            if (!m.active || !segmentMeetsBox(o, d, inverse, length, m.newBox)) continue;
             const Ray local = m.toLocal(o, d, length);
             if (segmentMeetsBox(local.origin, local.direction, length, m.objectBox) &&
                 scene.occludedByMobile(m.entity, local))
