@@ -1,5 +1,7 @@
 #pragma once
 
+#include "runtime/core/SystemMemory.h"
+
 #include <cstddef>
 #include <cstdlib>
 #include <new>
@@ -23,10 +25,15 @@ namespace qgi {
  *  a type without a constructor (floats, glm vectors, integers) are left unwritten, not zeroed.
  *  Every user writes what it grows before reading it (the tracer's output, re-traced paths,
  *  compaction, the grid's id lists), and zeroing 100 MiB it is about to overwrite cost the
- *  tracer about 2 % of its time. */
+ *  tracer about 2 % of its time.
+ *
+ *  A block of 64 MiB or more that exceeds the memory available (availableMemoryBytes) throws
+ *  std::bad_alloc at once. */
 template <typename T> struct LargeArrayAllocator {
     using value_type = T;
     static constexpr std::size_t kHugePage = std::size_t(2) << 20;
+    /// Blocks from this size on are checked against the memory available (a file read).
+    static constexpr std::size_t kCheckedBytes = std::size_t(64) << 20;
 
     LargeArrayAllocator() noexcept = default;
     template <typename U> LargeArrayAllocator(const LargeArrayAllocator<U>&) noexcept {}
@@ -35,6 +42,10 @@ template <typename T> struct LargeArrayAllocator {
         if (n > std::size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
         const std::size_t bytes = n * sizeof(T);
         if (bytes < kHugePage) return static_cast<T*>(::operator new(bytes));
+        // Linux grants more than it has and kills the process when the pages are written: a
+        // block the machine cannot hold is refused here (std::bad_alloc), where the caller can
+        // say what to lower.
+        if (bytes >= kCheckedBytes) checkMemoryFor(bytes, availableMemoryBytes());
         const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
         void* p = std::aligned_alloc(kHugePage, rounded);
         if (!p) throw std::bad_alloc();

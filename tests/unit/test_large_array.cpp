@@ -1,13 +1,17 @@
 // LargeArray (runtime/core/LargeArray.h): a std::vector whose big blocks are 2 MiB aligned and
 // advised for huge pages. It must behave as a vector on both sides of that threshold.
 #include "runtime/core/LargeArray.h"
+#include "runtime/core/SystemMemory.h"
 
 #include "runtime/ecs/Entity.h"
 
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <fstream>
+#include <new>
 #include <numeric>
+#include <string>
 
 namespace qgi {
 namespace {
@@ -51,6 +55,31 @@ TEST(LargeArray, GrowingKeepsConstructorsAndGivenValues) {
 TEST(LargeArray, AnImpossibleSizeThrowsInsteadOfWrapping) {
     LargeArrayAllocator<std::uint64_t> allocator;
     EXPECT_THROW((void)allocator.allocate(std::size_t(-1) / 4), std::bad_array_new_length);
+}
+
+// The machine's figure: positive and no more than its memory and swap together.
+TEST(SystemMemory, AvailableMemoryIsWhatTheMachineHas) {
+    const std::optional<std::size_t> available = availableMemoryBytes();
+    ASSERT_TRUE(available.has_value()) << "/proc/meminfo unreadable";
+    std::ifstream in("/proc/meminfo");
+    std::string key, unit;
+    std::size_t kilobytes = 0, total = 0;
+    while (in >> key >> kilobytes) {
+        std::getline(in, unit);
+        if (key == "MemTotal:" || key == "SwapTotal:") total += kilobytes * 1024;
+    }
+    EXPECT_GT(*available, std::size_t(0));
+    EXPECT_LE(*available, total);
+}
+
+TEST(SystemMemory, ABlockOverWhatIsAvailableIsRefused) {
+    EXPECT_THROW(checkMemoryFor(101, 100), std::bad_alloc);
+    EXPECT_NO_THROW(checkMemoryFor(100, 100));
+    EXPECT_NO_THROW(checkMemoryFor(std::size_t(1) << 60, std::nullopt)); // no figure: no check
+    // Through the allocator: more than the machine has is a bad_alloc, not a grant the kernel
+    // would have to take back by killing the process.
+    LargeArray<std::uint8_t> huge;
+    EXPECT_THROW(huge.reserve(*availableMemoryBytes() + (std::size_t(1) << 30)), std::bad_alloc);
 }
 
 } // namespace
