@@ -41,12 +41,12 @@ std::optional<std::size_t> cgroupHeadroom() {
     if (!(maxFile >> max) || max == "max") return std::nullopt;
     std::size_t limit = 0;
     std::istringstream(max) >> limit;
+    if (limit == 0) return std::nullopt;
     std::ifstream stat(*folder + "/memory.stat");
     std::string key;
     std::size_t value = 0, anon = 0;
     while (stat >> key >> value)
         if (key == "anon") anon = value;
-    if (limit == 0) return std::nullopt;
     return limit > anon ? limit - anon : 0;
 }
 

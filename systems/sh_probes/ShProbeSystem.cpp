@@ -462,9 +462,8 @@ void ShProbeSystem::markChanges(const Registry& registry) {
         std::exchange(mLightSet, lights) != lights)
         all = true; // one removed, or (un)tagged a stand-in
 
-    // A delta seen before (the photon update skipped a frame) has nothing new; after one
-    // missed, what changed is unknown: everything is marked. Hand-made deltas (sequence 0) are
-    // always new.
+    // A delta seen before marks nothing; after one missed, what changed is unknown:
+    // everything is marked (PhotonDeltaReader).
     const PhotonDelta* delta = registry.ctx().find<PhotonDelta>();
     if (delta) {
         const PhotonDeltaReader::News news = mDeltaReader.read(*delta);
@@ -642,10 +641,11 @@ void ShProbeSystem::sweep() {
     // for as long as changes near the avatars fill the budget. None is taken twice: two
     // threads would project it at once.
     const auto count = std::uint32_t(mStale.size());
+    const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
+    if (visits == 0) return;
     if (mSweepCursor >= count) mSweepCursor = 0; // build() resets it; a smaller volume
     mChosen.assign(mRefresh.begin(), mRefresh.end());
     std::sort(mChosen.begin(), mChosen.end());
-    const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
     for (std::uint32_t k = 0; k < visits; ++k) {
         const std::uint32_t p = mSweepCursor;
         mSweepCursor = mSweepCursor + 1 == count ? 0 : mSweepCursor + 1;
