@@ -422,7 +422,8 @@ void addStructure(BuiltinSceneBuilder& builder) {
               std::array{5.f, kFirstFloorUnderside - 0.02f, 0.8f, 0.3f},
               std::array{0.f, kRoofUnderside - 0.02f, 0.6f, 0.25f}}) {
             ProceduralMesh quad;
-            const auto corner = [&](float du, float dw) {
+            // Copied into the lambda: clang before 16 cannot capture structured bindings.
+            const auto corner = [&, u = u, y = y](float du, float dw) {
                 return onSide(side, 9.5f, {u + du, y, dw});
             };
             quad.addQuad(corner(-halfLength, -halfWidth), corner(halfLength, -halfWidth),

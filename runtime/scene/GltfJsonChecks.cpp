@@ -67,6 +67,7 @@ std::string oneLine(std::string text) {
         text.pop_back();
     std::replace_if(
         text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
+    text = printable(text);
     if (text.size() > kMaxLength) text = text.substr(0, kMaxLength) + "...";
     return text;
 }

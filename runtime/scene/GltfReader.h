@@ -22,6 +22,7 @@
 #include "components/PointLight.h"
 #include "components/SpotLight.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 #include "runtime/scene/BuiltinScenes.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/TextureLibrary.h"
@@ -108,8 +109,9 @@ template <typename T> T load(const unsigned char* p) {
     return value;
 }
 
-/// Replaces line breaks so a message from a library stays one line, and bounds its length
-/// (tinygltf quotes whole data URIs). In GltfJsonChecks.cpp.
+/// Replaces line breaks with spaces, then escapes other control bytes (printable() in Log.h),
+/// and bounds the length (tinygltf quotes whole data URIs): for messages from a library. In
+/// GltfJsonChecks.cpp.
 std::string oneLine(std::string text);
 
 /// What the image callback knows and reports: which images are drawn, a failure (tinygltf
@@ -138,10 +140,12 @@ public:
     ImportedScene read();
 
 private:
+    /// Throws "<file>: <field>: <what>" with control bytes escaped (printable() in Log.h): a
+    /// message may quote the file (a key, a name, an image's chunk type) and stays one line.
     template <typename... Args>
     [[noreturn]] void fail(std::string_view field, Args&&... what) const {
-        if (field.empty()) qgi::fail(mLabel, ": ", std::forward<Args>(what)...);
-        qgi::fail(mLabel, ": ", field, ": ", std::forward<Args>(what)...);
+        if (field.empty()) throw Error(printable(str(mLabel, ": ", std::forward<Args>(what)...)));
+        throw Error(printable(str(mLabel, ": ", field, ": ", std::forward<Args>(what)...)));
     }
     void checkIndex(std::string_view field, int index, std::size_t count,
                     std::string_view what) const {

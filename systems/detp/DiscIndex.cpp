@@ -398,14 +398,15 @@ std::uint32_t DiscIndex::PlaneSieve::candidates(const glm::vec3& o, const glm::v
         const float t = (offset[p] - (o.x * nx[p] + o.y * ny[p] + o.z * nz[p])) / cosine;
         const float margin = 1e-4f * (std::abs(offset[p]) + size + std::abs(t));
         const float x = o.x + t * d.x, y = o.y + t * d.y, z = o.z + t * d.z;
-        // Bitwise, not short-circuit: no branches, so the loop vectorises.
-        const bool away = cosine >= facing[p];
-        const bool grazes = std::abs(cosine) < grazing[p];
-        const bool outside = (t < start - margin) | (t > stop + margin) | (x < lowX[p] - margin) |
-                             (x > highX[p] + margin) | (y < lowY[p] - margin) |
-                             (y > highY[p] + margin) | (z < lowZ[p] - margin) |
-                             (z > highZ[p] + margin);
-        keep[p] = std::uint32_t((!away) & (grazes | (!outside)));
+        // Bitwise on 0/1 integers, not short-circuit: no branches, so the loop vectorises.
+        const std::uint32_t away = cosine >= facing[p];
+        const std::uint32_t grazes = std::abs(cosine) < grazing[p];
+        const std::uint32_t outside =
+            std::uint32_t(t < start - margin) | std::uint32_t(t > stop + margin) |
+            std::uint32_t(x < lowX[p] - margin) | std::uint32_t(x > highX[p] + margin) |
+            std::uint32_t(y < lowY[p] - margin) | std::uint32_t(y > highY[p] + margin) |
+            std::uint32_t(z < lowZ[p] - margin) | std::uint32_t(z > highZ[p] + margin);
+        keep[p] = (away ^ 1u) & (grazes | (outside ^ 1u));
     }
     std::uint32_t mask = 0;
     for (std::size_t p = 0; p < kLanes; ++p)

@@ -75,6 +75,14 @@ double clippedArea(const std::array<glm::dvec2, 3>& tri, const glm::dvec2& lo,
     return 0.5 * std::abs(twice);
 }
 
+/// floor(v) as an int, saturated to +-2^30 (NaN reads as -2^30): far outside every map and
+/// grid, where converting the float itself would be undefined.
+int floorIndex(float v) {
+    constexpr float kLimit = 1073741824.f;
+    if (!(v >= -kLimit)) return -(1 << 30);
+    return v <= kLimit ? int(std::floor(v)) : (1 << 30);
+}
+
 } // namespace
 
 std::uint64_t vlfKey(const VlfScene& scene, const VlfSettings& s) {
@@ -255,10 +263,10 @@ glm::vec3 Vlf::linePoint(std::size_t psf, const glm::vec2& uv) const {
 std::uint32_t Vlf::texelAt(std::uint32_t face, const glm::vec3& x) const {
     const Face& f = mFaces[face];
     const FaceMap& m = mFaceMaps[face];
-    const int tx = std::clamp(int(std::floor(glm::dot(x - f.origin, f.axisU) / m.texelU)), 0,
-                              int(m.width) - 1);
-    const int ty = std::clamp(int(std::floor(glm::dot(x - f.origin, f.axisV) / m.texelV)), 0,
-                              int(m.height) - 1);
+    const int tx =
+        std::clamp(floorIndex(glm::dot(x - f.origin, f.axisU) / m.texelU), 0, int(m.width) - 1);
+    const int ty =
+        std::clamp(floorIndex(glm::dot(x - f.origin, f.axisV) / m.texelV), 0, int(m.height) - 1);
     return m.firstTexel + std::uint32_t(ty) * m.width + std::uint32_t(tx);
 }
 
@@ -314,7 +322,7 @@ glm::vec3 Vlf::sampleTexels(const std::vector<glm::vec3>& texels, std::uint32_t 
     const FaceMap& m = mFaceMaps[face];
     const float fx = glm::dot(x - f.origin, f.axisU) / m.texelU - 0.5f;
     const float fy = glm::dot(x - f.origin, f.axisV) / m.texelV - 0.5f;
-    const int x0 = int(std::floor(fx)), y0 = int(std::floor(fy));
+    const int x0 = floorIndex(fx), y0 = floorIndex(fy);
     const float ax = fx - float(x0), ay = fy - float(y0);
     glm::vec3 sum(0.f);
     float wsum = 0.f;
@@ -342,7 +350,7 @@ glm::vec3 Vlf::sampleCells(const std::vector<glm::vec4>& cells, std::size_t sf, 
                            const glm::vec3& x, float& wOut) const {
     const float h = cellWidth();
     const glm::vec2 c = (project(psf, x) + 1.f) / h - 0.5f;
-    const int i0 = int(std::floor(c.x)), j0 = int(std::floor(c.y));
+    const int i0 = floorIndex(c.x), j0 = floorIndex(c.y);
     // A point within 1e-4 cells of a cell centre (float rounding of the projection) takes
     // that cell alone, so a lookup at a cell centre returns the stored value exactly.
     const auto snap = [](float a) { return a < 1e-4f ? 0.f : a > 1.f - 1e-4f ? 1.f : a; };

@@ -4,10 +4,16 @@
 #include "runtime/io/CacheFile.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/core/Finite.h"
 #include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
 #include "systems/vlf/VlfBake.h"
 
+#include <glm/geometric.hpp>
+#include <glm/vector_relational.hpp>
+
+#include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -47,7 +53,7 @@ public:
         if (n > (bytes.size() - pos) / sizeof(T) || (expected != SIZE_MAX && n != expected))
             fail(path, ": VLF cache is corrupt (an array size does not match)");
         std::vector<T> v(n);
-        std::memcpy(v.data(), bytes.data() + pos, n * sizeof(T));
+        if (n > 0) std::memcpy(v.data(), bytes.data() + pos, n * sizeof(T));
         pos += n * sizeof(T);
         return v;
     }
@@ -64,6 +70,51 @@ struct FacePod {
     glm::vec3 diffuse, emission, specular;
     float phongExponent;
 };
+
+bool isUnit(const glm::vec3& v) {
+    return isFinite(v) && std::abs(glm::length(v) - 1.f) < 1e-3f;
+}
+bool isColour(const glm::vec3& v) {
+    return isFinite(v) && glm::all(glm::greaterThanEqual(v, glm::vec3(0.f)));
+}
+bool isLength(float v) {
+    return std::isfinite(v) && v >= 0.f;
+}
+
+/// What a loaded field must satisfy before a lookup may index with it: the checksum only
+/// proves the file is as written, not that it was written by this code.
+void checkLoaded(const Vlf& v, const std::string& name) {
+    const auto corrupt = [&](const char* what) {
+        fail(name, ": VLF cache is corrupt (", what, ")");
+    };
+    if (!isFinite(v.center()) || !(std::isfinite(v.radius()) && v.radius() > 0.f))
+        corrupt("bounds not finite");
+    for (const Face& f : v.faces())
+        if (!isUnit(f.normal) || !isUnit(f.axisU) || !isUnit(f.axisV) || !isFinite(f.origin) ||
+            !std::isfinite(f.offset) || !isLength(f.extentU) || !isLength(f.extentV) ||
+            !isLength(f.area) || !isColour(f.diffuse) || !isColour(f.emission) ||
+            !isColour(f.specular) || !isLength(f.phongExponent))
+            corrupt("a face holds values out of range");
+    for (const FaceMap& m : v.faceMaps())
+        if (!(std::isfinite(m.texelU) && m.texelU > 0.f && std::isfinite(m.texelV) &&
+              m.texelV > 0.f))
+            corrupt("a texel size is not positive");
+    for (const float c : v.texelCoverage())
+        if (!(c >= 0.f && c <= 1.f)) corrupt("a texel coverage is outside [0, 1]");
+    for (const glm::vec3& e : v.irradiance())
+        if (!isColour(e)) corrupt("an irradiance is negative or not finite");
+    for (std::size_t sf = 0; sf < v.specularFaceCount(); ++sf)
+        if (v.specularIndex(v.specularFace(sf)) != std::int32_t(sf))
+            corrupt("specular faces do not match their index");
+    for (std::uint32_t f = 0; f < v.faces().size(); ++f) {
+        const std::int32_t sf = v.specularIndex(f);
+        if (sf < -1 || (sf >= 0 && std::size_t(sf) >= v.specularFaceCount()))
+            corrupt("a specular index is out of range");
+    }
+    for (const glm::vec4& cell : v.tiles())
+        if (!isColour(glm::vec3(cell)) || !isLength(cell.w))
+            corrupt("a tile cell is negative or not finite");
+}
 
 } // namespace
 
@@ -181,11 +232,12 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
     }
     const std::size_t nf = v.mFaces.size();
     v.mFaceMaps = r.getVector<FaceMap>(nf);
-    std::size_t texels = 0;
+    std::uint64_t texels = 0; // firstTexel is 32 bits: so is every texel index
     for (const FaceMap& m : v.mFaceMaps) {
-        if (m.firstTexel != texels || m.width == 0 || m.height == 0)
+        if (m.firstTexel != texels || m.width == 0 || m.height == 0 || m.width > (1u << 30) ||
+            m.height > (1u << 30) || std::uint64_t(m.width) * m.height > UINT32_MAX - texels)
             fail(name, ": VLF cache is corrupt (irradiance maps do not line up)");
-        texels += std::size_t(m.width) * m.height;
+        texels += std::uint64_t(m.width) * m.height;
     }
     v.mCoverage = r.getVector<float>(texels);
     v.mIrradiance = r.getVector<glm::vec3>(texels);
@@ -195,18 +247,27 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
         if (f >= nf) fail(name, ": VLF cache is corrupt (specular face out of range)");
     v.mBlocks = r.getVector<TileBlock>(v.mSpecularFaces.size() * v.mDirections->size());
     v.mSlots = r.getVector<std::int32_t>();
-    v.mTileCount = std::size_t(r.get<std::uint64_t>());
-    const int n = s.linesPerSide / s.tileSize;
-    for (const TileBlock& b : v.mBlocks)
-        if (b.side != 0 &&
-            (b.s0 < 0 || b.t0 < 0 || b.sw < 1 || b.tw < 1 || b.s0 + b.sw > n || b.t0 + b.tw > n ||
-             std::size_t(b.firstSlot) + std::size_t(b.sw) * b.tw > v.mSlots.size()))
+    const std::uint64_t tileCount = r.get<std::uint64_t>();
+    const std::size_t cellsPerTile = std::size_t(s.tileSize) * s.tileSize;
+    if (tileCount > (bytes.size() - r.pos) / (cellsPerTile * sizeof(glm::vec4)))
+        fail(name, ": VLF cache is corrupt (more tiles than the file holds)");
+    v.mTileCount = std::size_t(tileCount);
+    const std::int64_t n = s.linesPerSide / s.tileSize;
+    for (const TileBlock& b : v.mBlocks) {
+        if (b.side < -1 || b.side > 1)
+            fail(name, ": VLF cache is corrupt (a tile block faces no side)");
+        if (b.side != 0 && (b.s0 < 0 || b.t0 < 0 || b.sw < 1 || b.tw < 1 ||
+                            std::int64_t(b.s0) + b.sw > n || std::int64_t(b.t0) + b.tw > n ||
+                            std::uint64_t(b.firstSlot) + std::uint64_t(b.sw) * std::uint64_t(b.tw) >
+                                v.mSlots.size()))
             fail(name, ": VLF cache is corrupt (a tile block is out of range)");
+    }
     for (std::int32_t slot : v.mSlots)
         if (slot < -1 || (slot >= 0 && std::size_t(slot) >= v.mTileCount))
             fail(name, ": VLF cache is corrupt (a tile slot is out of range)");
-    v.mTiles = r.getVector<glm::vec4>(v.mTileCount * std::size_t(s.tileSize) * s.tileSize);
+    v.mTiles = r.getVector<glm::vec4>(v.mTileCount * cellsPerTile);
     if (r.pos != bytes.size()) fail(name, ": VLF cache is corrupt (trailing bytes)");
+    checkLoaded(v, name);
     return v;
 }
 

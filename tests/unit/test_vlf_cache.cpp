@@ -11,6 +11,7 @@
 #include "components/StaticMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
+#include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
 #include "systems/frame/FrameSchedule.h"
 #include "systems/vlf/VlfBake.h"
@@ -24,8 +25,10 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include <unistd.h>
@@ -34,21 +37,6 @@ using namespace qgi;
 using namespace qgi::vlf;
 
 namespace {
-
-std::unique_ptr<VlfScene> glossyRoom(float lamp = 4.f) {
-    test::VlfSceneBuilder b;
-    const std::uint32_t wall = b.material(glm::vec3(0.5f));
-    const std::uint32_t light = b.material(glm::vec3(0.f), glm::vec3(lamp));
-    const std::uint32_t glossy = b.material(glm::vec3(0.3f), glm::vec3(0.f), glm::vec3(0.6f), 10.f);
-    const std::uint32_t mirror = b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(0.8f), 0.f);
-    b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true, [&](int axis, int side) {
-        if (axis == 1 && side == 0) return glossy;
-        if (axis == 0 && side == 1) return light;
-        if (axis == 2 && side == 0) return mirror;
-        return wall;
-    });
-    return b.build();
-}
 
 VlfSettings small() {
     VlfSettings s;
@@ -86,7 +74,7 @@ void expectMessage(const std::filesystem::path& p, std::uint64_t key, const char
 } // namespace
 
 TEST(VlfCache, RoundTripKeepsEveryValue) {
-    const auto scene = glossyRoom();
+    const auto scene = test::glossyRoom();
     const Vlf a = bakeVlf(*scene, small());
     const auto path = tempFile("roundtrip.vlf");
     VlfCache::save(a, path);
@@ -116,7 +104,7 @@ TEST(VlfCache, RoundTripKeepsEveryValue) {
 }
 
 TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
-    const auto scene = glossyRoom();
+    const auto scene = test::glossyRoom();
     const VlfSettings s = small();
     const Vlf a = bakeVlf(*scene, s);
     const auto path = tempFile("bad.vlf");
@@ -125,7 +113,7 @@ TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
     const std::vector<char> good = readAll(path);
 
     // Stale: another scene or other settings give another key.
-    EXPECT_NE(vlfKey(*glossyRoom(5.f), s), key);
+    EXPECT_NE(vlfKey(*test::glossyRoom(5.f), s), key);
     VlfSettings other = s;
     other.iterations = 3;
     EXPECT_NE(vlfKey(*scene, other), key);
@@ -162,8 +150,116 @@ TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
     expectMessage(path, key, "no VLF cache");
 }
 
+namespace {
+
+/// Where each of save()'s arrays starts in a file (after its count), and the tile count.
+struct Sections {
+    std::size_t faces = 0, faceMaps = 0, coverage = 0, irradiance = 0, specularIndex = 0,
+                specularFaces = 0, blocks = 0, slots = 0, tileCount = 0, tiles = 0;
+};
+
+Sections sections(const std::vector<char>& file) {
+    constexpr std::size_t kHeader = 36, kSettingsAndBounds = 56;
+    constexpr std::size_t kFace = 104, kFaceMap = 20, kBlock = 24;
+    std::size_t at = kHeader + kSettingsAndBounds;
+    const auto array = [&](std::size_t element) {
+        std::uint64_t n = 0;
+        if (at + sizeof n > file.size()) return at;
+        std::memcpy(&n, &file[at], sizeof n);
+        at += sizeof n;
+        if (n > file.size()) n = 0; // a wrong layout; the check below reports it
+        const std::size_t first = at;
+        at += n * element;
+        return first;
+    };
+    Sections s;
+    s.faces = array(kFace);
+    s.faceMaps = array(kFaceMap);
+    s.coverage = array(sizeof(float));
+    s.irradiance = array(sizeof(glm::vec3));
+    s.specularIndex = array(sizeof(std::int32_t));
+    s.specularFaces = array(sizeof(std::uint32_t));
+    s.blocks = array(kBlock);
+    s.slots = array(sizeof(std::int32_t));
+    s.tileCount = at;
+    at += sizeof(std::uint64_t);
+    s.tiles = array(sizeof(glm::vec4));
+    EXPECT_EQ(at, file.size()) << "save()'s layout changed: update sections()";
+    return s;
+}
+
+/// Writes `value` at `at` and gives the payload its hash again, as a hostile file would.
+template <typename T>
+std::vector<char> withValue(std::vector<char> file, std::size_t at, const T& value) {
+    std::memcpy(&file[at], &value, sizeof value);
+    Fnv1aHasher h;
+    h.addBytes(file.data() + 36, file.size() - 36);
+    const std::uint64_t hash = h.value();
+    std::memcpy(&file[28], &hash, sizeof hash);
+    return file;
+}
+
+} // namespace
+
+// The payload hash proves a file is as it was written, not that qgi wrote it: values a lookup
+// would index with or shade by are checked too (a fuzzer found lookups reading out of bounds).
+TEST(VlfCache, HostileValuesWithAValidHashAreRejected) {
+    const auto scene = test::glossyRoom();
+    const VlfSettings s = small();
+    const auto path = tempFile("hostile.vlf");
+    VlfCache::save(bakeVlf(*scene, s), path);
+    const std::uint64_t key = vlfKey(*scene, s);
+    const std::vector<char> good = readAll(path);
+    const Sections at = sections(good);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+
+    writeAll(path, withValue(good, 36 + 52, 0.f)); // the bounding sphere's radius
+    expectMessage(path, key, "bounds not finite");
+    writeAll(path, withValue(good, at.faces, nan)); // face 0's normal.x
+    expectMessage(path, key, "a face holds values out of range");
+    writeAll(path, withValue(good, at.faceMaps + 8, -1.f)); // face 0's texelU
+    expectMessage(path, key, "a texel size is not positive");
+    writeAll(path, withValue(good, at.faceMaps, std::uint32_t(1) << 31)); // face 0's width
+    expectMessage(path, key, "irradiance maps do not line up");
+    writeAll(path, withValue(good, at.coverage, 2.f));
+    expectMessage(path, key, "a texel coverage is outside [0, 1]");
+    writeAll(path, withValue(good, at.irradiance, -1.f));
+    expectMessage(path, key, "an irradiance is negative or not finite");
+
+    // A diffuse face (index -1) pointed past the specular faces, and a specular face pointed
+    // at another one's slot.
+    writeAll(path, good);
+    const Vlf field = VlfCache::load(path, key);
+    std::int32_t diffuse = -1, specular = -1;
+    for (std::uint32_t f = 0; f < field.faces().size(); ++f)
+        (field.specularIndex(f) < 0 ? diffuse : specular) = std::int32_t(f);
+    ASSERT_GE(diffuse, 0);
+    ASSERT_GE(specular, 0);
+    ASSERT_GE(field.specularFaceCount(), 2u);
+    writeAll(path,
+             withValue(good, at.specularIndex + 4 * std::size_t(diffuse), std::int32_t(1000)));
+    expectMessage(path, key, "a specular index is out of range");
+    const std::int32_t wrong = (field.specularIndex(std::uint32_t(specular)) + 1) %
+                               std::int32_t(field.specularFaceCount());
+    writeAll(path, withValue(good, at.specularIndex + 4 * std::size_t(specular), wrong));
+    expectMessage(path, key, "specular faces do not match their index");
+
+    writeAll(path, withValue(good, at.blocks, std::int32_t(5))); // block 0's side
+    expectMessage(path, key, "a tile block faces no side");
+    writeAll(path, withValue(good, at.tileCount, std::uint64_t(1) << 62));
+    expectMessage(path, key, "more tiles than the file holds");
+    writeAll(path, withValue(good, at.tiles + 12, -1.f)); // cell 0's weight
+    expectMessage(path, key, "a tile cell is negative or not finite");
+    writeAll(path, withValue(good, at.tiles, std::numeric_limits<float>::infinity()));
+    expectMessage(path, key, "a tile cell is negative or not finite");
+
+    writeAll(path, good); // and the file as written still loads
+    EXPECT_NO_THROW(VlfCache::load(path, key));
+    std::filesystem::remove(path);
+}
+
 TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
-    const auto scene = glossyRoom();
+    const auto scene = test::glossyRoom();
     const VlfSettings s = small();
     const auto path = tempFile("rebuild.vlf");
     std::filesystem::remove(path);
@@ -185,7 +281,7 @@ TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
 
 TEST(VlfCache, AnUnwritableCacheFileStillGivesTheBakedField) {
     // The cache's folder is a regular file: no one, root included, can write there.
-    const auto scene = glossyRoom();
+    const auto scene = test::glossyRoom();
     const VlfSettings s = small();
     const auto blocker = tempFile("not_a_folder");
     writeAll(blocker, {'x'});
@@ -197,7 +293,7 @@ TEST(VlfCache, AnUnwritableCacheFileStillGivesTheBakedField) {
 }
 
 TEST(VlfCache, SomebodysFileAtThePathIsNeverOverwritten) {
-    const auto scene = glossyRoom();
+    const auto scene = test::glossyRoom();
     const VlfSettings s = small();
     const auto notes = tempFile("notes.vlf");
     writeAll(notes, {'m', 'y', ' ', 'n', 'o', 't', 'e', 's'});

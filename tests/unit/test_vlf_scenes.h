@@ -70,4 +70,21 @@ inline int findFace(const vlf::VlfScene& scene, const glm::vec3& normal, const g
     return -1;
 }
 
+/// A 2 m room with one emissive wall (radiance `lamp`), a glossy floor, a mirror wall and
+/// grey diffuse walls: every kind of face the VLF stores.
+inline std::unique_ptr<vlf::VlfScene> glossyRoom(float lamp = 4.f) {
+    VlfSceneBuilder b;
+    const std::uint32_t wall = b.material(glm::vec3(0.5f));
+    const std::uint32_t light = b.material(glm::vec3(0.f), glm::vec3(lamp));
+    const std::uint32_t glossy = b.material(glm::vec3(0.3f), glm::vec3(0.f), glm::vec3(0.6f), 10.f);
+    const std::uint32_t mirror = b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(0.8f), 0.f);
+    b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true, [&](int axis, int side) {
+        if (axis == 1 && side == 0) return glossy;
+        if (axis == 0 && side == 1) return light;
+        if (axis == 2 && side == 0) return mirror;
+        return wall;
+    });
+    return b.build();
+}
+
 } // namespace qgi::test

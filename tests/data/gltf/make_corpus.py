@@ -333,7 +333,6 @@ def bad():
     case("bufferview_past_buffer.gltf", lambda d: d["bufferViews"][1].update(byteLength=400))
     case("accessor_past_view.gltf", lambda d: d["accessors"][0].update(count=4))
     case("bad_component_type.gltf", lambda d: d["accessors"][0].update(componentType=DOUBLE))
-    case("non_triangle.gltf", lambda d: primitive(d).update(mode=1))
     case("nan_position.gltf", lambda d: set_floats(d, [0, 0, 0, 1, 0, 0, 0, float("nan"), 0]))
     case("inf_position.gltf", lambda d: set_floats(d, [0, 0, 0, float("inf"), 0, 0, 0, 1, 0]))
     case("node_cycle.gltf", lambda d: d.update(nodes=[
@@ -359,8 +358,19 @@ def bad():
     case("index_out_of_range.gltf", lambda d: set_indices(d, [0, 1, 7]))
     case("unsupported_required_extension.gltf",
          lambda d: d.update(extensionsRequired=["KHR_draco_mesh_compression"]))
-    case("corrupt_image.gltf", lambda d: d.update(
-        images=[{"uri": "data:image/png;base64," + base64.b64encode(png(2, 2, TEXTURE)[:30]).decode()}]))
+    def drawn_image(d, image):
+        """The triangle textured with `image` (PNG bytes): an image a material draws."""
+        primitive(d).update(material=0)
+        d.update(materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+                 textures=[{"source": 0}],
+                 images=[{"uri": "data:image/png;base64," + base64.b64encode(image).decode()}])
+
+    case("corrupt_image.gltf", lambda d: drawn_image(d, png(2, 2, TEXTURE)[:30]))
+    # A critical chunk of unknown type whose name is a line break and a bell: the decoder's
+    # reason quotes the name, and the message must stay one printable line.
+    odd = png(2, 2, TEXTURE)
+    odd = odd[:33] + struct.pack(">I", 0) + b"\nND\x07" + struct.pack(">I", zlib.crc32(b"\nND\x07")) + odd[33:]
+    case("image_chunk_control_bytes.gltf", lambda d: drawn_image(d, odd))
 
     text = json.dumps(base, indent=2)
     (out / "truncated.gltf").write_text(text[: len(text) // 2])
