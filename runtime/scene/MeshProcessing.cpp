@@ -140,9 +140,48 @@ struct TriangleHash {
     }
 };
 
+// How many triangles longest-edge bisection makes of triangle abc on its own, until no edge
+// is longer than sqrt(max2); counting stops once past `limit`. A long thin triangle takes far
+// more than its area suggests: each split leaves a piece with two long sides, so a 20 km by
+// 6 cm sliver refined to 1 m edges becomes some 14 million pieces, not 20 thousand. (Splits
+// that reach it from neighbours add a few more; refine() enforces the limit itself.)
+double bisectionCount(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c, double max2,
+                      double limit) {
+    // No piece with every side within the bound is larger than the equilateral one: an absurd
+    // bound is refused without counting.
+    const double atLeast =
+        0.5 * glm::length(glm::cross(b - a, c - a)) / (0.25 * std::sqrt(3.0) * max2);
+    if (atLeast > limit) return atLeast;
+    std::vector<std::array<glm::dvec3, 3>> pending{{a, b, c}};
+    double count = 0.0;
+    while (!pending.empty() && count <= limit) {
+        const auto [p, q, r] = pending.back();
+        pending.pop_back();
+        const double pq = glm::dot(q - p, q - p), qr = glm::dot(r - q, r - q),
+                     rp = glm::dot(p - r, p - r);
+        if (std::max({pq, qr, rp}) <= max2) {
+            count += 1.0;
+        } else if (pq >= qr && pq >= rp) {
+            const glm::dvec3 m = 0.5 * (p + q);
+            pending.push_back({p, m, r});
+            pending.push_back({m, q, r});
+        } else if (qr >= rp) {
+            const glm::dvec3 m = 0.5 * (q + r);
+            pending.push_back({q, m, p});
+            pending.push_back({m, r, p});
+        } else {
+            const glm::dvec3 m = 0.5 * (r + p);
+            pending.push_back({r, m, q});
+            pending.push_back({m, p, q});
+        }
+    }
+    return count;
+}
+
 // Welded triangles without repeated vertices, slivers, tiny ones or exact duplicates (the
 // same corners in the same orientation; a reversed copy is a legitimate back side). Also
-// estimates how many triangles refinement will make, to refuse absurd edge bounds early.
+// counts how many triangles refinement will make (bisectionCount, up to just past the
+// limit), to refuse edge bounds the mesh cannot take before any memory goes to them.
 std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& welded,
                                      const MeshProcessingOptions& options,
                                      double& refinedEstimate) {
@@ -160,19 +199,13 @@ std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& weld
         const glm::dvec3 b(welded.positions[t[1]]);
         const glm::dvec3 c(welded.positions[t[2]]);
         if (!hasArea(a, b, c, double(options.minTriangleArea))) continue;
-        const double doubleArea = glm::length(glm::cross(b - a, c - a));
-        const double longest2 =
-            std::max({glm::dot(b - a, b - a), glm::dot(c - b, c - b), glm::dot(a - c, a - c)});
         // Rotate the smallest index first: the key of a triangle regardless of start corner.
         std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
         if (!seen.insert(t).second) continue;
         triangles.push_back(t);
-        if (maxEdge > 0.0) {
-            // Bisection leaves triangles of about maxEdge^2 / 8 or more, and a sliver needs at
-            // least longest / maxEdge pieces.
-            refinedEstimate += std::max(
-                {1.0, 4.0 * doubleArea / (maxEdge * maxEdge), std::sqrt(longest2) / maxEdge});
-        }
+        if (maxEdge > 0.0 && refinedEstimate <= options.maxTriangles)
+            refinedEstimate +=
+                bisectionCount(a, b, c, maxEdge * maxEdge, options.maxTriangles - refinedEstimate);
     }
     return triangles;
 }
@@ -245,7 +278,7 @@ OmMesh buildHalfedgeMesh(const WeldedVertices& welded, const std::vector<Triangl
 // Longest-edge bisection: always split the longest edge left, at its midpoint, until none
 // exceeds the bound. Splitting the longest edge first keeps triangle angles bounded away from
 // zero; midpoints make both copies of an edge on a uv seam split at the same points.
-void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength) {
+void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength, double maxTriangles) {
     const float max2 = maxEdgeLength * maxEdgeLength;
     const auto length2 = [&](OmMesh::HalfedgeHandle h) {
         const glm::vec3 d = toGlm(mesh.point(mesh.to_vertex_handle(h))) -
@@ -269,6 +302,9 @@ void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength) {
             uvs.push_back(0.5f * (uvs[std::size_t(a.idx())] + uvs[std::size_t(b.idx())]));
         const auto m = mesh.add_vertex(toOm(mid));
         mesh.split(e, m);
+        if (double(mesh.n_faces()) > maxTriangles)
+            fail("mesh processing: maxEdgeLength ", maxEdgeLength, " m refines past the limit of ",
+                 maxTriangles, " triangles (splits spread from neighbouring triangles)");
         // The split edge's halves and the new edges to the opposite corners all meet at m;
         // no other edge changed, so the queue holds no stale entries.
         for (const auto out : mesh.voh_range(m)) {
@@ -373,11 +409,11 @@ Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options) {
     const std::vector<Triangle> triangles = cleanTriangles(raw, welded, options, refinedEstimate);
     if (refinedEstimate > options.maxTriangles)
         fail("mesh processing: maxEdgeLength ", options.maxEdgeLength, " m would refine ",
-             triangles.size(), " triangles into about ", refinedEstimate,
-             ", more than the limit of ", options.maxTriangles);
+             triangles.size(), " triangles into more than the limit of ", options.maxTriangles,
+             " (the bound is too small for the mesh, or its triangles are far thinner than it)");
     std::vector<glm::vec2> uvs;
     OmMesh mesh = buildHalfedgeMesh(welded, triangles, uvs);
-    if (options.maxEdgeLength > 0.f) refine(mesh, uvs, options.maxEdgeLength);
+    if (options.maxEdgeLength > 0.f) refine(mesh, uvs, options.maxEdgeLength, options.maxTriangles);
     return extractWithNormals(mesh, uvs, options.creaseAngle);
 }
 

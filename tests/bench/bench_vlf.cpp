@@ -134,10 +134,8 @@ void Iteration(benchmark::State& state) {
     s.tileSize = 8;
     s.iterations = 1;
     vlf::VlfBakeStats stats;
-    double seconds = 0.0;
     for (auto _ : state) {
         const vlf::Vlf v = vlf::bakeVlf(*scene, s, &stats);
-        seconds += stats.iterations[0].seconds;
         state.SetIterationTime(stats.iterations[0].seconds);
         benchmark::DoNotOptimize(v.irradiance().data());
     }

@@ -164,6 +164,37 @@ TEST(MeshProcessing, BadInputThrows) {
     EXPECT_THROW(processMesh(soupCube(), refinedTo(1e-5f)), Error);
 }
 
+// Longest-edge bisection of a long thin triangle leaves a piece with two long sides at every
+// split, so it makes far more triangles than area or length suggest: this 100 m x 1 cm sliver
+// at a 1 m bound becomes 3^7 = 2187 pieces, where area and length alone said about 100. The
+// triangle limit must hold against what refinement really makes (a fuzzed glTF with such a
+// sliver refined without end while its estimate sat far below the limit).
+TEST(MeshProcessing, TheTriangleLimitHoldsForSlivers) {
+    Mesh sliver;
+    sliver.positions = {{0.f, 0.f, 0.f}, {100.f, 0.f, 0.f}, {0.f, 0.01f, 0.f}};
+    sliver.indices = {0, 1, 2};
+    MeshProcessingOptions options = refinedTo(1.f);
+    options.maxTriangles = 2187;
+    const Mesh out = processMesh(sliver, options);
+    EXPECT_EQ(out.indices.size() / 3, 2187u);
+    double longest = 0.0;
+    for (std::size_t k = 0; k < out.indices.size(); k += 3)
+        for (int i = 0; i < 3; ++i)
+            longest = std::max(longest,
+                               double(glm::distance(out.positions[out.indices[k + i]],
+                                                    out.positions[out.indices[k + (i + 1) % 3]])));
+    EXPECT_LE(longest, 1.0);
+
+    options.maxTriangles = 2186;
+    try {
+        processMesh(sliver, options);
+        ADD_FAILURE() << "a refinement past the limit was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("more than the limit of 2186"), std::string::npos)
+            << e.what();
+    }
+}
+
 TEST(MeshProcessing, SoupCubeWeldsToEightCornersAndSplitsCreasesToTwentyFour) {
     MeshProcessingOptions noCreases;
     noCreases.creaseAngle = glm::pi<float>();
