@@ -2,7 +2,8 @@
 // scene bounds, uniform random directions, fixed seed. Single-ray and 8-wide batched queries on
 // 1 and 2 threads (oneTBB arenas, argument = threads) on every built-in scene, the cost of moving
 // one mobile (syncMoved), the full build, and the price of the robust mode (Intersect8Fast:
-// robust off, leaky at edges).
+// robust off, leaky at edges), and loading each scene (SceneLoad: mesh processing included).
+#include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
@@ -149,6 +150,23 @@ void BM_Build(benchmark::State& state, const std::string& name) {
     state.SetLabel(std::to_string(w.scene.staticTriangleCount()) + " static triangles");
 }
 
+/// Builds the built-in scene into a fresh registry: geometry generation and mesh processing
+/// (welding, the refinement count, refinement, normals), the ray scene not included.
+void BM_SceneLoad(benchmark::State& state, const std::string& name) {
+    std::size_t triangles = 0;
+    for (auto _ : state) {
+        auto registry = std::make_unique<Registry>();
+        buildBuiltinScene(*registry, name, SceneOptions{});
+        state.PauseTiming(); // counting and tearing down are not the load
+        triangles = 0;
+        registry->view<const Mesh>().each(
+            [&](Entity, const Mesh& mesh) { triangles += mesh.indices.size() / 3; });
+        registry.reset();
+        state.ResumeTiming();
+    }
+    state.SetLabel(std::to_string(triangles) + " triangles");
+}
+
 /// Runs a throughput benchmark on 1 .. `most` threads (its argument).
 void onThreads(benchmark::internal::Benchmark* b, int most) {
     b->DenseRange(1, most)->ArgName("threads")->UseRealTime()->Unit(benchmark::kMillisecond);
@@ -171,6 +189,8 @@ int main(int argc, char** argv) {
         RegisterBenchmark(id("MobileMove").c_str(), BM_MobileMove, scene)
             ->Unit(benchmark::kMicrosecond);
         RegisterBenchmark(id("Build").c_str(), BM_Build, scene)->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("SceneLoad").c_str(), BM_SceneLoad, scene)
+            ->Unit(benchmark::kMillisecond);
     }
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
