@@ -5,7 +5,10 @@
 
 #include "runtime/core/Error.h"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <cstddef>
 #include <cstdint>
@@ -18,14 +21,24 @@
 
 namespace qgi::fuzz {
 
-/// A folder of this process's own, removed at exit.
+/// A folder of this process's own, removed at exit. libFuzzer leaves some runs without exit
+/// handlers (a crash, a timeout), so folders of processes that are gone are removed first.
 inline const std::filesystem::path& folder() {
     static const std::filesystem::path path = [] {
-        const std::filesystem::path base = std::filesystem::exists("/dev/shm")
-                                               ? std::filesystem::path("/dev/shm")
-                                               : std::filesystem::temp_directory_path();
-        std::filesystem::path made = base / ("qgi-fuzz-" + std::to_string(::getpid()));
-        std::filesystem::create_directories(made);
+        namespace fs = std::filesystem;
+        const fs::path base =
+            fs::exists("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
+        constexpr std::string_view kPrefix = "qgi-fuzz-";
+        std::error_code error;
+        for (const auto& entry : fs::directory_iterator(base, error)) {
+            const std::string name = entry.path().filename().string();
+            if (!name.starts_with(kPrefix)) continue;
+            const long pid = std::strtol(name.c_str() + kPrefix.size(), nullptr, 10);
+            if (pid > 0 && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH)
+                fs::remove_all(entry.path(), error);
+        }
+        fs::path made = base / (std::string(kPrefix) + std::to_string(::getpid()));
+        fs::create_directories(made);
         std::atexit([] { std::filesystem::remove_all(folder()); });
         return made;
     }();
