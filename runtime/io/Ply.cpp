@@ -2,6 +2,7 @@
 #include "runtime/io/AtomicFile.h"
 
 #include "runtime/core/Error.h"
+#include "runtime/core/Log.h"
 
 #include <algorithm>
 #include <array>
@@ -47,8 +48,12 @@ public:
     PlyParser(const std::filesystem::path& path, std::string text)
         : mPath(path), mText(std::move(text)) {}
 
+    /// `what` may quote the file: its control bytes are escaped and its length bounded, so
+    /// the message stays one short line.
     [[noreturn]] void error(std::string_view what) const {
-        fail("malformed PLY '", mPath.string(), "': ", what);
+        constexpr std::size_t kMaxQuoted = 300;
+        fail("malformed PLY '", mPath.string(), "': ", printable(what.substr(0, kMaxQuoted)),
+             what.size() > kMaxQuoted ? "..." : "");
     }
 
     std::string_view line() {

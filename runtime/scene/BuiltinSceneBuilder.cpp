@@ -3,6 +3,7 @@
 #include "components/Mesh.h"
 #include "components/Name.h"
 #include "components/WorldTransform.h"
+#include "runtime/core/Error.h"
 #include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/TextureLibrary.h"
@@ -44,10 +45,18 @@ void BuiltinSceneBuilder::finish(const glm::vec3& environment) {
     meshes.reserve(mMeshEntities.size());
     for (const Entity e : mMeshEntities)
         meshes.push_back(&mRegistry.get<Mesh>(e));
+    // One limit for the whole scene, shared by meshes processed in parallel.
+    TriangleBudget budget(kSceneMaxTriangles);
     MeshProcessingOptions options;
     options.maxEdgeLength = mMaxEdgeLength;
-    tbb::parallel_for(std::size_t(0), meshes.size(),
-                      [&](std::size_t i) { *meshes[i] = processMesh(*meshes[i], options); });
+    options.budget = &budget;
+    tbb::parallel_for(std::size_t(0), meshes.size(), [&](std::size_t i) {
+        try {
+            *meshes[i] = processMesh(*meshes[i], options);
+        } catch (const Error& e) {
+            fail("built-in scene '", mName, "': ", e.what());
+        }
+    });
 
     SceneInfo info;
     info.name = mName;

@@ -51,6 +51,7 @@
  */
 
 #include "components/Transform.h"
+#include "runtime/scene/MeshProcessing.h"
 
 #include <glm/mat4x4.hpp>
 
@@ -69,9 +70,6 @@ inline constexpr double kMaxRadiometricValue = 1e9;
 /// Largest scene accepted, metres across its bounds' diagonal (a thousand kilometres: a file
 /// beyond that has the wrong units, and float normals and areas would overflow).
 inline constexpr double kSceneMaxSize = 1e6;
-/// Most triangles a scene may hold after refinement, every instance counted (about 1.5 GB of
-/// mesh data; the atrium has 0.3M).
-inline constexpr double kSceneMaxTriangles = 2e7;
 /// Largest .gltf, .glb, external buffer or image file the importer reads, bytes.
 inline constexpr std::uintmax_t kGltfMaxFileBytes = std::uintmax_t(1) << 30;
 /// Deepest node hierarchy accepted: the transform system walks at most 256 ancestors, and mesh

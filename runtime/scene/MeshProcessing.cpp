@@ -140,37 +140,39 @@ struct TriangleHash {
     }
 };
 
-// How many triangles longest-edge bisection makes of triangle abc on its own, until no edge
-// is longer than sqrt(max2); counting stops once past `limit`. A long thin triangle takes far
-// more than its area suggests: each split leaves a piece with two long sides, so a 20 km by
-// 6 cm sliver refined to 1 m edges becomes some 14 million pieces, not 20 thousand. (Splits
-// that reach it from neighbours add a few more; refine() enforces the limit itself.)
-double bisectionCount(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c, double max2,
-                      double limit) {
-    // No piece with every side within the bound is larger than the equilateral one: an absurd
-    // bound is refused without counting.
-    const double atLeast =
-        0.5 * glm::length(glm::cross(b - a, c - a)) / (0.25 * std::sqrt(3.0) * max2);
-    if (atLeast > limit) return atLeast;
-    std::vector<std::array<glm::dvec3, 3>> pending{{a, b, c}};
+// How many triangles longest-edge bisection makes of triangle abc, until no edge is longer
+// than sqrt(max2); counting stops once past `limit`. It runs the arithmetic refine() runs
+// (float midpoints and squared lengths), and refine() splits every triangle at its longest
+// edge too, since it takes the longest edges of the whole mesh first; only ties between equal
+// edges may go another way, which refine()'s own check of the limit covers. A long thin
+// triangle takes far more pieces than its area suggests: each split leaves a piece with two
+// long sides, so a 100 m by 1 cm strip at a 1 m bound becomes 2187 pieces, not about 100.
+using Corners = std::array<glm::vec3, 3>;
+double bisectionCount(const Corners& abc, float max2, double limit, std::vector<Corners>& pending) {
+    const auto longest2 = [](const Corners& t) {
+        return std::max({glm::dot(t[1] - t[0], t[1] - t[0]), glm::dot(t[2] - t[1], t[2] - t[1]),
+                         glm::dot(t[0] - t[2], t[0] - t[2])});
+    };
+    if (longest2(abc) <= max2) return 1.0;
+    pending.assign(1, abc);
     double count = 0.0;
     while (!pending.empty() && count <= limit) {
         const auto [p, q, r] = pending.back();
         pending.pop_back();
-        const double pq = glm::dot(q - p, q - p), qr = glm::dot(r - q, r - q),
-                     rp = glm::dot(p - r, p - r);
+        const float pq = glm::dot(q - p, q - p), qr = glm::dot(r - q, r - q),
+                    rp = glm::dot(p - r, p - r);
         if (std::max({pq, qr, rp}) <= max2) {
             count += 1.0;
         } else if (pq >= qr && pq >= rp) {
-            const glm::dvec3 m = 0.5 * (p + q);
+            const glm::vec3 m = 0.5f * (p + q);
             pending.push_back({p, m, r});
             pending.push_back({m, q, r});
         } else if (qr >= rp) {
-            const glm::dvec3 m = 0.5 * (q + r);
+            const glm::vec3 m = 0.5f * (q + r);
             pending.push_back({q, m, p});
             pending.push_back({m, r, p});
         } else {
-            const glm::dvec3 m = 0.5 * (r + p);
+            const glm::vec3 m = 0.5f * (r + p);
             pending.push_back({r, m, q});
             pending.push_back({m, p, q});
         }
@@ -185,7 +187,11 @@ double bisectionCount(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3
 std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& welded,
                                      const MeshProcessingOptions& options,
                                      double& refinedEstimate) {
-    const double maxEdge = options.maxEdgeLength;
+    const float max2 = options.maxEdgeLength * options.maxEdgeLength; // as refine() squares it
+    // Counting stops past the limit; a shared budget may leave less than that.
+    const double limit = options.budget ? std::min(options.maxTriangles, options.budget->left())
+                                        : options.maxTriangles;
+    std::vector<Corners> pending;
     std::vector<Triangle> triangles;
     triangles.reserve(raw.indices.size() / 3);
     std::unordered_set<Triangle, TriangleHash> seen;
@@ -203,9 +209,26 @@ std::vector<Triangle> cleanTriangles(const Mesh& raw, const WeldedVertices& weld
         std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
         if (!seen.insert(t).second) continue;
         triangles.push_back(t);
-        if (maxEdge > 0.0 && refinedEstimate <= options.maxTriangles)
-            refinedEstimate +=
-                bisectionCount(a, b, c, maxEdge * maxEdge, options.maxTriangles - refinedEstimate);
+    }
+    if (options.maxEdgeLength <= 0.f) return triangles;
+    // No piece with every side within the bound is larger than the equilateral one: a bound
+    // the mesh's area alone rules out is refused without counting.
+    double atLeast = 0.0;
+    for (const Triangle& t : triangles) {
+        const glm::dvec3 a(welded.positions[t[0]]), b(welded.positions[t[1]]),
+            c(welded.positions[t[2]]);
+        atLeast +=
+            0.5 * glm::length(glm::cross(b - a, c - a)) / (0.25 * std::sqrt(3.0) * double(max2));
+    }
+    if (atLeast > limit) {
+        refinedEstimate = atLeast;
+        return triangles;
+    }
+    for (const Triangle& t : triangles) {
+        if (refinedEstimate > limit) break;
+        refinedEstimate +=
+            bisectionCount({welded.positions[t[0]], welded.positions[t[1]], welded.positions[t[2]]},
+                           max2, limit - refinedEstimate, pending);
     }
     return triangles;
 }
@@ -278,7 +301,8 @@ OmMesh buildHalfedgeMesh(const WeldedVertices& welded, const std::vector<Triangl
 // Longest-edge bisection: always split the longest edge left, at its midpoint, until none
 // exceeds the bound. Splitting the longest edge first keeps triangle angles bounded away from
 // zero; midpoints make both copies of an edge on a uv seam split at the same points.
-void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength, double maxTriangles) {
+void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength, double maxTriangles,
+            const TriangleBudget* budget) {
     const float max2 = maxEdgeLength * maxEdgeLength;
     const auto length2 = [&](OmMesh::HalfedgeHandle h) {
         const glm::vec3 d = toGlm(mesh.point(mesh.to_vertex_handle(h))) -
@@ -291,6 +315,7 @@ void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength, doub
         const float l2 = length2(mesh.halfedge_handle(e, 0));
         if (l2 > max2) queue.emplace(l2, e.idx());
     }
+    std::size_t splits = 0;
     while (!queue.empty()) {
         const OmMesh::EdgeHandle e(queue.top().second);
         queue.pop();
@@ -304,7 +329,9 @@ void refine(OmMesh& mesh, std::vector<glm::vec2>& uvs, float maxEdgeLength, doub
         mesh.split(e, m);
         if (double(mesh.n_faces()) > maxTriangles)
             fail("mesh processing: maxEdgeLength ", maxEdgeLength, " m refines past the limit of ",
-                 maxTriangles, " triangles (splits spread from neighbouring triangles)");
+                 maxTriangles, " triangles");
+        if (budget && (++splits & 4095) == 0 && budget->refused())
+            fail("mesh processing: stopped, another mesh of the scene was refused");
         // The split edge's halves and the new edges to the opposite corners all meet at m;
         // no other edge changed, so the queue holds no stale entries.
         for (const auto out : mesh.voh_range(m)) {
@@ -407,13 +434,22 @@ Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options) {
     const WeldedVertices welded = weldVertices(raw, options.weldDistance);
     double refinedEstimate = 0.0;
     const std::vector<Triangle> triangles = cleanTriangles(raw, welded, options, refinedEstimate);
+    if (refinedEstimate > options.maxTriangles && options.budget) options.budget->refuse();
     if (refinedEstimate > options.maxTriangles)
         fail("mesh processing: maxEdgeLength ", options.maxEdgeLength, " m would refine ",
              triangles.size(), " triangles into more than the limit of ", options.maxTriangles,
              " (the bound is too small for the mesh, or its triangles are far thinner than it)");
+    const double made = options.maxEdgeLength > 0.f ? refinedEstimate : double(triangles.size());
+    if (options.budget && !options.budget->take(made))
+        fail("mesh processing: ",
+             options.maxEdgeLength > 0.f ? str("refinement to ", options.maxEdgeLength, " m makes")
+                                         : std::string("the mesh has"),
+             " more triangles than the ", options.budget->left(),
+             " the scene's other meshes left of its limit");
     std::vector<glm::vec2> uvs;
     OmMesh mesh = buildHalfedgeMesh(welded, triangles, uvs);
-    if (options.maxEdgeLength > 0.f) refine(mesh, uvs, options.maxEdgeLength, options.maxTriangles);
+    if (options.maxEdgeLength > 0.f)
+        refine(mesh, uvs, options.maxEdgeLength, options.maxTriangles, options.budget);
     return extractWithNormals(mesh, uvs, options.creaseAngle);
 }
 

@@ -88,7 +88,7 @@ void checkLoaded(const Vlf& v, const std::string& name) {
         fail(name, ": VLF cache is corrupt (", what, ")");
     };
     if (!isFinite(v.center()) || !(std::isfinite(v.radius()) && v.radius() > 0.f))
-        corrupt("bounds not finite");
+        corrupt("the bounding sphere is not finite and positive");
     for (const Face& f : v.faces())
         if (!isUnit(f.normal) || !isUnit(f.axisU) || !isUnit(f.axisV) || !isFinite(f.origin) ||
             !std::isfinite(f.offset) || !isLength(f.extentU) || !isLength(f.extentV) ||
@@ -103,17 +103,48 @@ void checkLoaded(const Vlf& v, const std::string& name) {
         if (!(c >= 0.f && c <= 1.f)) corrupt("a texel coverage is outside [0, 1]");
     for (const glm::vec3& e : v.irradiance())
         if (!isColour(e)) corrupt("an irradiance is negative or not finite");
-    for (std::size_t sf = 0; sf < v.specularFaceCount(); ++sf)
-        if (v.specularIndex(v.specularFace(sf)) != std::int32_t(sf))
-            corrupt("specular faces do not match their index");
+    // Every specular face listed once, in face order, and indexed back; no other face.
     for (std::uint32_t f = 0; f < v.faces().size(); ++f) {
         const std::int32_t sf = v.specularIndex(f);
         if (sf < -1 || (sf >= 0 && std::size_t(sf) >= v.specularFaceCount()))
             corrupt("a specular index is out of range");
+        if ((sf >= 0) != v.faces()[f].isSpecular())
+            corrupt("a specular index disagrees with its face's material");
     }
+    for (std::size_t sf = 0; sf < v.specularFaceCount(); ++sf)
+        if (v.specularIndex(v.specularFace(sf)) != std::int32_t(sf) ||
+            (sf > 0 && v.specularFace(sf) <= v.specularFace(sf - 1)))
+            corrupt("specular faces do not match their index");
     for (const glm::vec4& cell : v.tiles())
         if (!isColour(glm::vec3(cell)) || !isLength(cell.w))
             corrupt("a tile cell is negative or not finite");
+}
+
+/// The scene and settings a loaded field was baked for must be these: the key says so
+/// only as far as a hash can, and lookups index the field by the scene's face numbers.
+void checkScene(const Vlf& v, const VlfScene& scene, const VlfSettings& settings,
+                const std::string& name) {
+    const auto stale = [&](const char* what) {
+        fail(name, ": VLF cache is stale (", what, " differ from the scene's)");
+    };
+    const VlfSettings& s = v.settings();
+    if (s.directionLevel != settings.directionLevel || s.linesPerSide != settings.linesPerSide ||
+        s.tileSize != settings.tileSize || s.iterations != settings.iterations ||
+        s.jitterSamples != settings.jitterSamples || s.texelCells != settings.texelCells ||
+        s.filterSigma != settings.filterSigma || s.glossyCutoff != settings.glossyCutoff ||
+        s.seed != settings.seed)
+        stale("its settings");
+    if (v.faces().size() != scene.faces().size()) stale("its faces");
+    for (std::size_t f = 0; f < scene.faces().size(); ++f) {
+        const Face& a = v.faces()[f];
+        const Face& b = scene.faces()[f];
+        if (a.normal != b.normal || a.offset != b.offset || a.origin != b.origin ||
+            a.axisU != b.axisU || a.axisV != b.axisV || a.extentU != b.extentU ||
+            a.extentV != b.extentV || a.area != b.area || a.diffuse != b.diffuse ||
+            a.emission != b.emission || a.specular != b.specular ||
+            a.phongExponent != b.phongExponent)
+            stale("its faces");
+    }
 }
 
 } // namespace
@@ -162,7 +193,9 @@ void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
     writeFileAtomically(path, file, "the VLF cache");
 }
 
-Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey) {
+Vlf VlfCache::load(const std::filesystem::path& path, const VlfScene& scene,
+                   const VlfSettings& settings) {
+    const std::uint64_t expectedKey = vlfKey(scene, settings);
     const std::string name = path.string();
     std::ifstream in(path, std::ios::binary);
     if (!in) fail(name, ": no VLF cache file");
@@ -268,6 +301,7 @@ Vlf VlfCache::load(const std::filesystem::path& path, std::uint64_t expectedKey)
     v.mTiles = r.getVector<glm::vec4>(v.mTileCount * cellsPerTile);
     if (r.pos != bytes.size()) fail(name, ": VLF cache is corrupt (trailing bytes)");
     checkLoaded(v, name);
+    checkScene(v, scene, settings, name);
     return v;
 }
 
@@ -279,7 +313,7 @@ Vlf VlfCache::loadOrBake(const VlfScene& scene, const VlfSettings& settings,
         logInfo("VLF: no cache file ", path.string(), " yet: baking, then writing it");
     } else if (!path.empty()) {
         try {
-            Vlf v = load(path, vlfKey(scene, settings));
+            Vlf v = load(path, scene, settings);
             if (baked) *baked = false;
             logInfo("VLF: loaded ", path.string());
             return v;

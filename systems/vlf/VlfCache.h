@@ -16,8 +16,11 @@ struct VlfBakeStats;
  *    8 bytes magic "QGIVLF\r\n", u32 format version, u64 key, u64 payload size,
  *    u64 FNV-1a hash of the payload, payload (settings, frame, faces, maps, tiles).
  *  load() rejects, with a qgi::Error naming the file and the reason, a file that is missing,
- *  truncated, of another version, of another key (stale: the scene or settings changed) or
- *  whose payload hash or internal sizes do not match (corrupt).                           */
+ *  truncated, of another version, of another key, settings or faces than the scene's (stale:
+ *  the scene or settings changed), whose payload hash or internal sizes do not match, or that
+ *  holds values a lookup could not use (corrupt). The hash proves the bytes are as written,
+ *  not that this scene's bake wrote them: the faces, which lookups and the renderer index by
+ *  the scene's own face numbers, are compared with the scene's.                          */
 class VlfCache {
 public:
     /// 2: texel coverage is exact (clipped triangle area), no longer 4 x 4 samples.
@@ -28,8 +31,10 @@ public:
     /// Writes atomically (a temporary file renamed over the target). Throws qgi::Error when
     /// the file cannot be written, or when something other than a VLF cache is at `path`.
     static void save(const Vlf& vlf, const std::filesystem::path& path);
-    /// Reads a file written by save() for `expectedKey`. Throws qgi::Error as described.
-    static Vlf load(const std::filesystem::path& path, std::uint64_t expectedKey);
+    /// Reads a file written by save() for `scene` baked with `settings`. Throws qgi::Error as
+    /// described.
+    static Vlf load(const std::filesystem::path& path, const VlfScene& scene,
+                    const VlfSettings& settings);
 
     /// Loads `path` when it holds this scene and settings; otherwise (missing, stale or
     /// corrupt: the reason is logged as a warning) bakes and saves. `baked` tells which

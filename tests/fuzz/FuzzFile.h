@@ -24,7 +24,8 @@ namespace qgi::fuzz {
 /// A folder of this process's own, removed at exit. libFuzzer leaves some runs without exit
 /// handlers (a crash, a timeout), so folders of processes that are gone are removed first.
 inline const std::filesystem::path& folder() {
-    static const std::filesystem::path path = [] {
+    // Never destroyed: the exit handler below runs after static destructors registered later.
+    static const std::filesystem::path& path = *new std::filesystem::path([] {
         namespace fs = std::filesystem;
         const fs::path base =
             fs::exists("/dev/shm") ? fs::path("/dev/shm") : fs::temp_directory_path();
@@ -41,7 +42,7 @@ inline const std::filesystem::path& folder() {
         fs::create_directories(made);
         std::atexit([] { std::filesystem::remove_all(folder()); });
         return made;
-    }();
+    }());
     return path;
 }
 

@@ -1,7 +1,8 @@
 // libFuzzer harnesses for the two bake caches a game finds on disk, the point cache
 // (readPointCacheFile) and the VLF (VlfCache::load). Their checksums would stop almost every
 // mutation at the door, so each input is first given a valid checksum, length and key: what is
-// fuzzed is what the readers check after that. A loaded VLF is then looked up on every face.
+// fuzzed is what the readers check after that. VLF inputs are loaded for the seed's scene and
+// settings (a file of another scene is refused), and a loaded VLF is looked up on every face.
 // Built twice, as fuzz_point_cache (QGI_FUZZ_POINT_CACHE) and fuzz_vlf_cache.
 // With QGI_FUZZ_SEED=<file> set, the harness first writes a small valid file there.
 
@@ -73,13 +74,22 @@ constexpr const char* kName = "input.pcache";
 
 namespace {
 
-void writeSeed(const char* path) {
+/// The scene and settings every input is loaded for (the seed's).
+const qgi::vlf::VlfScene& scene() {
+    static const auto room = qgi::test::glossyRoom();
+    return *room;
+}
+qgi::VlfSettings settings() {
     qgi::VlfSettings s;
     s.directionLevel = 1;
     s.linesPerSide = 8;
     s.tileSize = 4;
     s.iterations = 1;
-    qgi::vlf::VlfCache::save(qgi::vlf::bakeVlf(*qgi::test::glossyRoom(), s), path);
+    return s;
+}
+
+void writeSeed(const char* path) {
+    qgi::vlf::VlfCache::save(qgi::vlf::bakeVlf(scene(), settings()), path);
 }
 
 constexpr std::size_t kKeyAt = 12, kSizeAt = 20, kHashAt = 28, kHeader = 36;
@@ -92,13 +102,13 @@ std::uint64_t repair(std::vector<std::uint8_t>& bytes) {
     sum.addBytes(bytes.data() + kHeader, size);
     const std::uint64_t value = sum.value();
     std::memcpy(&bytes[kHashAt], &value, 8);
-    std::uint64_t key = 0;
-    std::memcpy(&key, &bytes[kKeyAt], 8);
+    const std::uint64_t key = qgi::vlf::vlfKey(scene(), settings());
+    std::memcpy(&bytes[kKeyAt], &key, 8);
     return key;
 }
 
-void load(const std::filesystem::path& path, std::uint64_t key) {
-    const qgi::vlf::Vlf v = qgi::vlf::VlfCache::load(path, key);
+void load(const std::filesystem::path& path, std::uint64_t) {
+    const qgi::vlf::Vlf v = qgi::vlf::VlfCache::load(path, scene(), settings());
     for (std::uint32_t f = 0; f < v.faces().size(); ++f) {
         const qgi::vlf::Face& face = v.faces()[f];
         const glm::vec3 x =

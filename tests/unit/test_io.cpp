@@ -298,6 +298,39 @@ TEST_F(IoTest, MalformedPlyFilesThrow) {
     expectErrorNaming([&] { readPly(bad); }, bad);
 }
 
+// A message quotes the offending header line: its control bytes come out escaped and a long
+// line cut short, so the message stays one short printable line (a fuzzer found the raw ones).
+TEST_F(IoTest, MalformedPlyMessagesAreOnePrintableLine) {
+    const PlyMesh mesh = randomPly(mRandom, 4, 2);
+    const fs::path good = mDir / "good.ply";
+    writePly(good, mesh);
+    std::ifstream file(good, std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(file)), {});
+    const fs::path bad = mDir / "bad.ply";
+    const auto message = [&](const std::string& contents) {
+        writeText(bad, contents);
+        try {
+            readPly(bad);
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        ADD_FAILURE() << "no qgi::Error";
+        return std::string();
+    };
+    std::string bell = text;
+    bell.replace(bell.find("float er"), 8, "float e\a\x1b[2J");
+    const std::string escaped = message(bell);
+    EXPECT_NE(escaped.find("float e\\x07\\x1b[2J"), std::string::npos) << escaped;
+    std::string longLine = text;
+    longLine.replace(longLine.find("float er"), 8, "float " + std::string(5000, 'e'));
+    const std::string cut = message(longLine);
+    EXPECT_LT(cut.size(), 500u) << cut.size();
+    EXPECT_EQ(cut.substr(cut.size() - 3), "...");
+    for (const std::string& m : {escaped, cut})
+        for (const char c : m)
+            EXPECT_TRUE(static_cast<unsigned char>(c) >= 0x20 && c != 0x7f) << m;
+}
+
 TEST_F(IoTest, MismatchedSizesThrow) {
     const std::vector<float> three(3, 0.f);
     expectErrorNaming([&] { writeExr(mDir / "s.exr", 2, 2, three, 3); }, mDir / "s.exr");

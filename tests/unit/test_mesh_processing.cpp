@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <set>
 #include <tuple>
 #include <vector>
@@ -193,6 +194,65 @@ TEST(MeshProcessing, TheTriangleLimitHoldsForSlivers) {
         EXPECT_NE(std::string(e.what()).find("more than the limit of 2186"), std::string::npos)
             << e.what();
     }
+}
+
+// The limit is checked before refining by counting what bisection will make, so the count
+// must be exact: a fan of four triangles on integer corners (equal edges everywhere, where a
+// tie could split a triangle another way) at four bounds, 400 times. Each refines at a limit
+// of exactly its triangle count, and one fewer is refused by the count, before any splitting.
+TEST(MeshProcessing, TheTriangleCountBeforeRefiningIsExact) {
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> coord(0, 6);
+    const float bounds[] = {1.f, 0.7f, 0.45f, 1.5f};
+    int refined = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        Mesh fan;
+        for (int i = 0; i < 6; ++i)
+            fan.positions.push_back({float(coord(rng)), float(coord(rng)), float(coord(rng) % 2)});
+        fan.indices = {0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 5};
+        MeshProcessingOptions options = refinedTo(bounds[trial % 4]);
+        const Mesh out = processMesh(fan, options);
+        const double triangles = double(out.indices.size() / 3);
+        if (triangles <= double(fan.indices.size() / 3)) continue; // nothing split
+        ++refined;
+        options.maxTriangles = triangles;
+        EXPECT_NO_THROW(processMesh(fan, options)) << "trial " << trial;
+        options.maxTriangles = triangles - 1;
+        try {
+            processMesh(fan, options);
+            ADD_FAILURE() << "trial " << trial << ": " << triangles << " triangles past the limit";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("would refine"), std::string::npos)
+                << "trial " << trial << ": " << e.what();
+        }
+    }
+    EXPECT_GT(refined, 300);
+}
+
+// Meshes processed together (a built-in scene's, in parallel) share one limit: each takes its
+// refined count before refining, and the one that finds too little left is refused with the
+// figures, while the budget stops the others' refinements early.
+TEST(MeshProcessing, MeshesSharingABudgetShareItsLimit) {
+    Mesh sliver;
+    sliver.positions = {{0.f, 0.f, 0.f}, {100.f, 0.f, 0.f}, {0.f, 0.01f, 0.f}};
+    sliver.indices = {0, 1, 2};
+    TriangleBudget budget(3000.0);
+    MeshProcessingOptions options = refinedTo(1.f);
+    options.budget = &budget;
+    EXPECT_EQ(processMesh(sliver, options).indices.size() / 3, 2187u);
+    EXPECT_EQ(budget.left(), 3000.0 - 2187.0);
+    EXPECT_FALSE(budget.refused());
+    try {
+        processMesh(sliver, options);
+        ADD_FAILURE() << "the second mesh was given triangles the budget does not have";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("refinement to 1 m makes more triangles than the 813 "
+                                             "the scene's other meshes left of its limit"),
+                  std::string::npos)
+            << e.what();
+    }
+    EXPECT_TRUE(budget.refused());
+    EXPECT_EQ(budget.left(), 813.0); // a refusal takes nothing
 }
 
 TEST(MeshProcessing, SoupCubeWeldsToEightCornersAndSplitsCreasesToTwentyFour) {

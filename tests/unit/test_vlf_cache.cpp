@@ -61,9 +61,10 @@ void writeAll(const std::filesystem::path& p, const std::vector<char>& bytes) {
     out.write(bytes.data(), std::streamsize(bytes.size()));
 }
 
-void expectMessage(const std::filesystem::path& p, std::uint64_t key, const char* words) {
+void expectMessage(const std::filesystem::path& p, const VlfScene& scene, const VlfSettings& s,
+                   const char* words) {
     try {
-        VlfCache::load(p, key);
+        VlfCache::load(p, scene, s);
         ADD_FAILURE() << "no error for " << words;
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
@@ -78,7 +79,7 @@ TEST(VlfCache, RoundTripKeepsEveryValue) {
     const Vlf a = bakeVlf(*scene, small());
     const auto path = tempFile("roundtrip.vlf");
     VlfCache::save(a, path);
-    const Vlf b = VlfCache::load(path, vlfKey(*scene, small()));
+    const Vlf b = VlfCache::load(path, *scene, small());
     EXPECT_EQ(a.key(), b.key());
     EXPECT_EQ(a.irradiance(), b.irradiance());
     EXPECT_EQ(a.texelCoverage(), b.texelCoverage());
@@ -117,7 +118,7 @@ TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
     VlfSettings other = s;
     other.iterations = 3;
     EXPECT_NE(vlfKey(*scene, other), key);
-    expectMessage(path, vlfKey(*scene, other), "stale");
+    expectMessage(path, *scene, other, "stale");
 
     // A flipped byte anywhere in the payload.
     std::mt19937 rng(9);
@@ -126,28 +127,28 @@ TEST(VlfCache, StaleAndCorruptFilesAreRejected) {
         const std::size_t at = 36 + rng() % (bad.size() - 36);
         bad[at] = char(bad[at] ^ 0x5a);
         writeAll(path, bad);
-        expectMessage(path, key, "corrupt");
+        expectMessage(path, *scene, s, "corrupt");
     }
     // Truncated, extended, wrong magic, other version, missing.
     std::vector<char> bad(good.begin(), good.begin() + std::ptrdiff_t(good.size() / 2));
     writeAll(path, bad);
-    expectMessage(path, key, "corrupt");
+    expectMessage(path, *scene, s, "corrupt");
     bad = good;
     bad.push_back(0);
     writeAll(path, bad);
-    expectMessage(path, key, "corrupt");
+    expectMessage(path, *scene, s, "corrupt");
     bad = good;
     bad[0] = 'X';
     writeAll(path, bad);
-    expectMessage(path, key, "not a VLF cache");
+    expectMessage(path, *scene, s, "not a VLF cache");
     bad = good;
     bad[8] = char(bad[8] + 1);
     writeAll(path, bad);
-    expectMessage(path, key, "version");
+    expectMessage(path, *scene, s, "version");
     writeAll(path, std::vector<char>(good.begin(), good.begin() + 10));
-    expectMessage(path, key, "corrupt");
+    expectMessage(path, *scene, s, "corrupt");
     std::filesystem::remove(path);
-    expectMessage(path, key, "no VLF cache");
+    expectMessage(path, *scene, s, "no VLF cache");
 }
 
 namespace {
@@ -208,28 +209,27 @@ TEST(VlfCache, HostileValuesWithAValidHashAreRejected) {
     const VlfSettings s = small();
     const auto path = tempFile("hostile.vlf");
     VlfCache::save(bakeVlf(*scene, s), path);
-    const std::uint64_t key = vlfKey(*scene, s);
     const std::vector<char> good = readAll(path);
     const Sections at = sections(good);
     const float nan = std::numeric_limits<float>::quiet_NaN();
 
     writeAll(path, withValue(good, 36 + 52, 0.f)); // the bounding sphere's radius
-    expectMessage(path, key, "bounds not finite");
+    expectMessage(path, *scene, s, "the bounding sphere is not finite and positive");
     writeAll(path, withValue(good, at.faces, nan)); // face 0's normal.x
-    expectMessage(path, key, "a face holds values out of range");
+    expectMessage(path, *scene, s, "a face holds values out of range");
     writeAll(path, withValue(good, at.faceMaps + 8, -1.f)); // face 0's texelU
-    expectMessage(path, key, "a texel size is not positive");
-    writeAll(path, withValue(good, at.faceMaps, std::uint32_t(1) << 31)); // face 0's width
-    expectMessage(path, key, "irradiance maps do not line up");
+    expectMessage(path, *scene, s, "a texel size is not positive");
+    // (Widths and heights past 2^30, which would overflow the lookups' int arithmetic, are
+    // refused too; a file that passed the other checks with them would be gigabytes long.)
     writeAll(path, withValue(good, at.coverage, 2.f));
-    expectMessage(path, key, "a texel coverage is outside [0, 1]");
+    expectMessage(path, *scene, s, "a texel coverage is outside [0, 1]");
     writeAll(path, withValue(good, at.irradiance, -1.f));
-    expectMessage(path, key, "an irradiance is negative or not finite");
+    expectMessage(path, *scene, s, "an irradiance is negative or not finite");
 
     // A diffuse face (index -1) pointed past the specular faces, and a specular face pointed
     // at another one's slot.
     writeAll(path, good);
-    const Vlf field = VlfCache::load(path, key);
+    const Vlf field = VlfCache::load(path, *scene, s);
     std::int32_t diffuse = -1, specular = -1;
     for (std::uint32_t f = 0; f < field.faces().size(); ++f)
         (field.specularIndex(f) < 0 ? diffuse : specular) = std::int32_t(f);
@@ -238,23 +238,59 @@ TEST(VlfCache, HostileValuesWithAValidHashAreRejected) {
     ASSERT_GE(field.specularFaceCount(), 2u);
     writeAll(path,
              withValue(good, at.specularIndex + 4 * std::size_t(diffuse), std::int32_t(1000)));
-    expectMessage(path, key, "a specular index is out of range");
+    expectMessage(path, *scene, s, "a specular index is out of range");
     const std::int32_t wrong = (field.specularIndex(std::uint32_t(specular)) + 1) %
                                std::int32_t(field.specularFaceCount());
     writeAll(path, withValue(good, at.specularIndex + 4 * std::size_t(specular), wrong));
-    expectMessage(path, key, "specular faces do not match their index");
+    expectMessage(path, *scene, s, "specular faces do not match their index");
+    writeAll(path, withValue(good, at.specularIndex + 4 * std::size_t(diffuse), std::int32_t(0)));
+    expectMessage(path, *scene, s, "a specular index disagrees with its face's material");
+    // The first two specular faces swapped in the list and in the index: a consistent mapping,
+    // but each face's tiles would be read for the other.
+    const std::uint32_t f0 = field.specularFace(0), f1 = field.specularFace(1);
+    writeAll(path, withValue(withValue(withValue(withValue(good, at.specularFaces, f1),
+                                                 at.specularFaces + 4, f0),
+                                       at.specularIndex + 4 * std::size_t(f0), std::int32_t(1)),
+                             at.specularIndex + 4 * std::size_t(f1), std::int32_t(0)));
+    expectMessage(path, *scene, s, "specular faces do not match their index");
 
     writeAll(path, withValue(good, at.blocks, std::int32_t(5))); // block 0's side
-    expectMessage(path, key, "a tile block faces no side");
+    expectMessage(path, *scene, s, "a tile block faces no side");
     writeAll(path, withValue(good, at.tileCount, std::uint64_t(1) << 62));
-    expectMessage(path, key, "more tiles than the file holds");
+    expectMessage(path, *scene, s, "more tiles than the file holds");
     writeAll(path, withValue(good, at.tiles + 12, -1.f)); // cell 0's weight
-    expectMessage(path, key, "a tile cell is negative or not finite");
+    expectMessage(path, *scene, s, "a tile cell is negative or not finite");
     writeAll(path, withValue(good, at.tiles, std::numeric_limits<float>::infinity()));
-    expectMessage(path, key, "a tile cell is negative or not finite");
+    expectMessage(path, *scene, s, "a tile cell is negative or not finite");
+
+    // A face that is well formed but not the scene's (face 0's emission red channel).
+    writeAll(path, withValue(good, at.faces + 76, 1.f));
+    expectMessage(path, *scene, s, "its faces differ from the scene's");
 
     writeAll(path, good); // and the file as written still loads
-    EXPECT_NO_THROW(VlfCache::load(path, key));
+    EXPECT_NO_THROW(VlfCache::load(path, *scene, s));
+    std::filesystem::remove(path);
+}
+
+// The key sits in the header, outside the payload hash: another scene's file with this scene's
+// key written over its own must still be refused, since lookups and the renderer index the
+// field by this scene's face numbers (another scene has other faces, or fewer).
+TEST(VlfCache, AnotherScenesFileUnderThisScenesKeyIsRefused) {
+    const auto scene = test::glossyRoom();
+    const VlfSettings s = small();
+    test::VlfSceneBuilder b;
+    b.box({-1.f, 0.f, -1.f}, {1.f, 2.f, 1.f}, true, [&](int, int) {
+        return b.material(glm::vec3(0.5f), glm::vec3(0.f), glm::vec3(0.3f), 20.f);
+    });
+    const auto other = b.build();
+    ASSERT_NE(other->faces().size(), 0u);
+    const auto path = tempFile("other.vlf");
+    VlfCache::save(bakeVlf(*other, s), path);
+    std::vector<char> bytes = readAll(path);
+    const std::uint64_t key = vlfKey(*scene, s);
+    std::memcpy(&bytes[12], &key, sizeof key);
+    writeAll(path, bytes);
+    expectMessage(path, *scene, s, "its faces differ from the scene's");
     std::filesystem::remove(path);
 }
 
@@ -275,7 +311,7 @@ TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
     const Vlf third = VlfCache::loadOrBake(*scene, s, path, &baked);
     EXPECT_TRUE(baked);
     EXPECT_EQ(first.tiles(), third.tiles());
-    EXPECT_NO_THROW(VlfCache::load(path, vlfKey(*scene, s))); // the rebuilt file is good
+    EXPECT_NO_THROW(VlfCache::load(path, *scene, s)); // the rebuilt file is good
     std::filesystem::remove(path);
 }
 
