@@ -31,6 +31,14 @@ protected:
     }
     void TearDown() override { fs::remove_all(mDir); }
 
+    /// The bytes writePly gives `mesh` (binary).
+    std::string plyText(const PlyMesh& mesh) const {
+        const fs::path path = mDir / "text.ply";
+        writePly(path, mesh);
+        std::ifstream file(path, std::ios::binary);
+        return {std::istreambuf_iterator<char>(file), {}};
+    }
+
     fs::path mDir;
     std::mt19937 mRandom{1234};
 };
@@ -269,9 +277,7 @@ TEST_F(IoTest, ReadsOfMissingOrCorruptFilesThrowNamingThePath) {
 TEST_F(IoTest, MalformedPlyFilesThrow) {
     const PlyMesh mesh = randomPly(mRandom, 4, 2);
     const fs::path good = mDir / "good.ply";
-    writePly(good, mesh);
-    std::ifstream file(good, std::ios::binary);
-    const std::string text((std::istreambuf_iterator<char>(file)), {});
+    const std::string text = plyText(mesh);
 
     const fs::path bad = mDir / "bad.ply";
     writeText(bad, text.substr(0, text.size() - 5)); // truncated data
@@ -301,11 +307,7 @@ TEST_F(IoTest, MalformedPlyFilesThrow) {
 // A message quotes the offending header line: its control bytes come out escaped and a long
 // line cut short, so the message stays one short printable line (a fuzzer found the raw ones).
 TEST_F(IoTest, MalformedPlyMessagesAreOnePrintableLine) {
-    const PlyMesh mesh = randomPly(mRandom, 4, 2);
-    const fs::path good = mDir / "good.ply";
-    writePly(good, mesh);
-    std::ifstream file(good, std::ios::binary);
-    const std::string text((std::istreambuf_iterator<char>(file)), {});
+    const std::string text = plyText(randomPly(mRandom, 4, 2));
     const fs::path bad = mDir / "bad.ply";
     const auto message = [&](const std::string& contents) {
         writeText(bad, contents);
