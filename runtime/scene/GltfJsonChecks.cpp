@@ -67,9 +67,9 @@ std::string oneLine(std::string text) {
         text.pop_back();
     std::replace_if(
         text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
-    text = printable(text);
-    if (text.size() > kMaxLength) text = text.substr(0, kMaxLength) + "...";
-    return text;
+    // Cut before escaping, so the cut never splits an escape.
+    const bool cut = text.size() > kMaxLength;
+    return printable(std::string_view(text).substr(0, kMaxLength)) + (cut ? "..." : "");
 }
 
 std::vector<unsigned char> GltfReader::readFile() const {
