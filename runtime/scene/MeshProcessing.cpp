@@ -149,12 +149,7 @@ struct TriangleHash {
 // long sides, so a 100 m by 1 cm strip at a 1 m bound becomes 2187 pieces, not about 100.
 using Corners = std::array<glm::vec3, 3>;
 double bisectionCount(const Corners& abc, float max2, double limit, std::vector<Corners>& pending) {
-    const auto longest2 = [](const Corners& t) {
-        return std::max({glm::dot(t[1] - t[0], t[1] - t[0]), glm::dot(t[2] - t[1], t[2] - t[1]),
-                         glm::dot(t[0] - t[2], t[0] - t[2])});
-    };
-    if (longest2(abc) <= max2) return 1.0;
-    pending.assign(1, abc);
+    pending.assign(1, abc); // `pending` is the caller's, so its memory is reused
     double count = 0.0;
     while (!pending.empty() && count <= limit) {
         const auto [p, q, r] = pending.back();
@@ -434,11 +429,12 @@ Mesh processMesh(const Mesh& raw, const MeshProcessingOptions& options) {
     const WeldedVertices welded = weldVertices(raw, options.weldDistance);
     double refinedEstimate = 0.0;
     const std::vector<Triangle> triangles = cleanTriangles(raw, welded, options, refinedEstimate);
-    if (refinedEstimate > options.maxTriangles && options.budget) options.budget->refuse();
-    if (refinedEstimate > options.maxTriangles)
+    if (refinedEstimate > options.maxTriangles) {
+        if (options.budget) options.budget->refuse();
         fail("mesh processing: maxEdgeLength ", options.maxEdgeLength, " m would refine ",
              triangles.size(), " triangles into more than the limit of ", options.maxTriangles,
              " (the bound is too small for the mesh, or its triangles are far thinner than it)");
+    }
     const double made = options.maxEdgeLength > 0.f ? refinedEstimate : double(triangles.size());
     if (options.budget && !options.budget->take(made))
         fail("mesh processing: ",
