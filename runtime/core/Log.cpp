@@ -52,6 +52,10 @@ std::string printable(std::string_view text) {
     return out;
 }
 
+std::string printableExcerpt(std::string_view text, std::size_t maxLength) {
+    return printable(text.substr(0, maxLength)) + (text.size() > maxLength ? "..." : "");
+}
+
 void logMessage(LogLevel level, const std::string& message) {
     if (level < logLevel()) return;
     const std::string line = printable(message);

@@ -3,6 +3,7 @@
 
 #include "runtime/core/Error.h"
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -31,6 +32,9 @@ private:
 /// file's names, a stray carriage return) become \xNN, so a message cannot move the cursor,
 /// retitle the window or forge another line. logMessage applies it to every message.
 std::string printable(std::string_view text);
+/// printable() of at most the first `maxLength` bytes, with "..." when cut: for quoting a
+/// file's text in a message. The cut comes before the escaping, so it never splits an escape.
+std::string printableExcerpt(std::string_view text, std::size_t maxLength);
 
 template <typename... Args> void logDebug(Args&&... args) {
     if (logLevel() <= LogLevel::Debug) logMessage(LogLevel::Debug, str(std::forward<Args>(args)...));

@@ -51,9 +51,7 @@ public:
     /// `what` may quote the file: its control bytes are escaped and its length bounded, so
     /// the message stays one short line.
     [[noreturn]] void error(std::string_view what) const {
-        constexpr std::size_t kMaxQuoted = 300;
-        fail("malformed PLY '", mPath.string(), "': ", printable(what.substr(0, kMaxQuoted)),
-             what.size() > kMaxQuoted ? "..." : "");
+        fail("malformed PLY '", mPath.string(), "': ", printableExcerpt(what, 300));
     }
 
     std::string_view line() {

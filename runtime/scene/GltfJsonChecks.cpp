@@ -67,9 +67,7 @@ std::string oneLine(std::string text) {
         text.pop_back();
     std::replace_if(
         text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
-    // Cut before escaping, so the cut never splits an escape.
-    const bool cut = text.size() > kMaxLength;
-    return printable(std::string_view(text).substr(0, kMaxLength)) + (cut ? "..." : "");
+    return printableExcerpt(text, kMaxLength);
 }
 
 std::vector<unsigned char> GltfReader::readFile() const {
