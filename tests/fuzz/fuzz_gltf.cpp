@@ -1,6 +1,6 @@
 // libFuzzer harness for the glTF importer: the input is a .glb when it starts with the GLB
 // magic, a .gltf otherwise. A file the importer refuses must leave the registry empty.
-// Run from the folder README.md's "Fuzzing" names, with tests/data/gltf as the seed corpus.
+// README.md, "Fuzzing the loaders", runs it with tests/data/gltf as the seed corpus.
 
 #include "FuzzFile.h"
 

@@ -1,4 +1,5 @@
-// libFuzzer harness for the irradiance PLY reader (readPly), seeded with writePly's output.
+// libFuzzer harness for the irradiance PLY reader (readPly); start it from files writePly
+// wrote (a demo run's --export-irradiance, in both formats).
 
 #include "FuzzFile.h"
 
