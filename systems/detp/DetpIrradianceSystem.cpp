@@ -117,6 +117,10 @@ void DetpIrradianceSystem::build(Registry& registry) {
     mIsTouched.assign(vertices, 0);
     mIsMoved.assign(mReceivers.receivers().size(), 0);
     mActive.assign(mReceivers.receivers().size(), 1);
+    mNear.assign(mReceivers.receivers().size(), NearSegments{});
+    mLastReach.assign(mReceivers.receivers().size(), Aabb{});
+    mNearIdle.assign(mReceivers.receivers().size(), 0);
+    mCopyWorthIt.assign(mReceivers.receivers().size(), 1);
     for (std::size_t r = 0; r < mActive.size(); ++r) {
         const auto& receiver = mReceivers.receivers()[r];
         if (receiver.mobile) mActive[r] = mobileActive(registry, receiver.entity);
@@ -242,7 +246,7 @@ Entity DetpIrradianceSystem::leavingSkippedFrom(std::uint32_t receiver) const {
 }
 
 void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
-                                           const PhotonSegments& segments,
+                                           SegmentRays segments, Strided<glm::vec3> power,
                                            std::span<const std::uint32_t> indices,
                                            std::span<const float> beyond, double sign,
                                            bool incremental) {
@@ -256,10 +260,10 @@ void DetpIrradianceSystem::accumulateDiscs(DiscIndex& discs, std::uint32_t first
         constexpr std::size_t kAhead = 16;
         for (std::size_t i = 0; i < mCrossings.size(); ++i) {
             if (i + kAhead < mCrossings.size())
-                __builtin_prefetch(&segments.power[mCrossings[i + kAhead].segment]);
+                __builtin_prefetch(&power[mCrossings[i + kAhead].segment]);
             const DiscCrossing& c = mCrossings[i];
             const std::uint32_t v = firstVertex + c.disc;
-            mPowerSum[v].add(sign * glm::dvec3(segments.power[c.segment]));
+            mPowerSum[v].add(sign * glm::dvec3(power[c.segment]));
             if (!incremental) continue;
             if (++mUpdateCount[v] >= mSettings.maxIncrementalUpdates) mNeedsFull = true;
             if (!mIsTouched[v]) {
@@ -297,22 +301,86 @@ void DetpIrradianceSystem::clearReceiver(std::uint32_t receiver) {
 void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const PhotonStore& store,
                                            std::span<const std::uint32_t> requested) {
     mEstimated.clear();
-    mMobileBoxes.clear();
     for (const std::uint32_t r : requested) {
         clearReceiver(r); // an inactive mobile stays so
-        if (!mActive[r]) continue;
-        mEstimated.push_back(r);
-        mMobileBoxes.push_back(discBounds(r));
+        if (mActive[r]) mEstimated.push_back(r);
     }
-    const std::span<const std::uint32_t> mobiles = mEstimated;
-    if (mobiles.empty()) return;
-    const std::size_t count = mobiles.size();
-    const float tail = crossingTail();
-    const PhotonSegments& segments = store.segments;
-    mLeavesFrom.clear();
-    for (const std::uint32_t r : mobiles)
-        mLeavesFrom.push_back(leavingSkippedFrom(r));
-    // One query and one walk for all of them: a path near several mobiles is read once.
+    if (mEstimated.empty()) return;
+    // Mobiles whose reach left their copy of the segments near them, or that keep none, walk
+    // the paths near them: into a new copy, or straight into the sums.
+    mWalked.clear();
+    mWalkCopies.clear();
+    mMobileBoxes.clear();
+    for (const std::uint32_t r : mEstimated) {
+        const Aabb reach = discBounds(r);
+        if (mNear[r].covers(reach)) continue;
+        const bool copy = mCopyWorthIt[r] && mSettings.nearSegmentMargin > 0.f;
+        mWalked.push_back(r);
+        mWalkCopies.push_back(copy);
+        mMobileBoxes.push_back(copy ? nearBox(r, reach) : reach);
+    }
+    if (!mWalked.empty()) walkNear(registry, store);
+
+    // A walk lists the segments in path order, and so does a copy, as a full estimate sums
+    // them: the same sums, bit for bit.
+    const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
+    std::size_t j = 0;
+    for (const std::uint32_t r : mEstimated) {
+        const bool walked = j < mWalked.size() && mWalked[j] == r;
+        const bool direct = walked && !mWalkCopies[j];
+        const auto& receiver = mReceivers.receivers()[r];
+        NearSegments& near = mNear[r];
+        if (direct) {
+            mStats.candidateSegments += mDirect[j].size();
+            accumulateDiscs(*mMobileDiscs[r], receiver.firstVertex, store.segments,
+                            store.segments.power.data(), mDirect[j], {}, 1.0, false);
+        } else {
+            near.select(
+                discBounds(r), !leavingSkippedFrom(r).isNull(),
+                [&](std::uint16_t light) { return countsFirst(light); }, mSegmentList);
+            mStats.nearSegments += near.size();
+            mStats.candidateSegments += mSegmentList.size();
+            accumulateDiscs(*mMobileDiscs[r], receiver.firstVertex, near.rays(), near.power(),
+                            mSegmentList, {}, 1.0, false);
+            if (!mCopyWorthIt[r]) near.clear(); // dearer to keep than to walk
+        }
+        j += walked ? 1 : 0;
+        const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
+        for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
+            mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
+        mLastReach[r] = discBounds(r);
+        mNearIdle[r] = 0;
+    }
+}
+
+Aabb DetpIrradianceSystem::nearBox(std::uint32_t receiver, const Aabb& reach) const {
+    const glm::vec3 size = reach.extent();
+    const float largest = std::max({size.x, size.y, size.z});
+    float margin = mSettings.nearSegmentMargin * largest;
+    // A mobile moving steadily leaves its copy after kNearMotionFrames moves at the least; one
+    // that jumped by more than an eighth of its size is not moving steadily.
+    if (const Aabb& last = mLastReach[receiver]; !last.empty()) {
+        const float motion = kNearMotionFrames * glm::length(reach.center() - last.center());
+        if (motion <= largest) margin = std::max(margin, motion);
+    }
+    Aabb box = reach;
+    box.min -= glm::vec3(margin);
+    box.max += glm::vec3(margin);
+    return box;
+}
+
+namespace {
+
+/// Surface area of a box: proportional to the number of long segments that cross it (by
+/// Cauchy's formula, its mean projected area is a quarter of it).
+double surfaceArea(const Aabb& box) {
+    const glm::dvec3 e(box.extent());
+    return 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+}
+
+} // namespace
+
+void DetpIrradianceSystem::walkNear(const Registry& registry, const PhotonStore& store) {
     std::span<const std::uint32_t> candidates;
     const PhotonPathGrid* grid = registry.ctx().find<PhotonPathGrid>();
     if (grid && grid->indexes(store)) {
@@ -324,46 +392,89 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
         candidates = mAllPaths;
     }
     mStats.candidatePaths += candidates.size();
-    // Per mobile, the segments that count and reach its discs' box, in parallel chunks of
-    // paths; the chunks are joined in order, so each list is in increasing path order, as a
-    // full estimate sums them: the same sums, bit for bit. (Segment k of a stored path has
-    // bounce k.) List (chunk c, mobile j) is mChunkLists[c * count + j].
+    mStats.mobilesWalked += mWalked.size();
+    // Per mobile, the segments that meet its box, in parallel chunks of paths; the chunks are
+    // joined in order, so each list is in (path, k) order. A copy takes them all; a mobile
+    // that keeps none takes only those that count and that do not leave it. List (chunk c,
+    // mobile j) is mChunkLists[c * count + j].
+    const std::size_t count = mWalked.size();
+    mLeavesFrom.clear();
+    for (std::size_t j = 0; j < count; ++j)
+        mLeavesFrom.push_back(mWalkCopies[j] ? Entity{} : leavingSkippedFrom(mWalked[j]));
+    const float tail = crossingTail();
+    const PhotonSegments& segments = store.segments;
     const std::size_t chunks = (candidates.size() + kPathGrain - 1) / kPathGrain;
     if (mChunkLists.size() < chunks * count) mChunkLists.resize(chunks * count);
     tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
         const std::span lists(mChunkLists.data() + c * count, count);
-        for (std::vector<std::uint32_t>& list : lists)
+        for (std::vector<NearSegments::Pick>& list : lists)
             list.clear();
         const std::size_t last = std::min(candidates.size(), (c + 1) * kPathGrain);
         walkPathsPrefetched(store, candidates, c * kPathGrain, last, [&](std::size_t i) {
             const PhotonPath& path = store.paths[candidates[i]];
-            for (std::uint32_t k = countsFirst(path.light) ? 0 : 1; k < path.count; ++k) {
+            const bool first = countsFirst(path.light);
+            for (std::uint32_t k = 0; k < path.count; ++k) {
                 const std::uint32_t s = path.first + k;
                 const Entity from = k > 0 ? segments.hitEntity[s - 1] : Entity{};
                 const glm::vec3& d = segments.direction[s];
                 const glm::vec3 inverse = 1.f / d;
                 for (std::size_t j = 0; j < count; ++j)
-                    if (!skipsLeaving(from, mLeavesFrom[j]) &&
+                    if ((mWalkCopies[j] ||
+                         ((k > 0 || first) && !skipsLeaving(from, mLeavesFrom[j]))) &&
                         segmentMeetsBox(segments.origin[s], d, inverse, segments.length[s] + tail,
                                         mMobileBoxes[j]))
-                        lists[j].push_back(s);
+                        lists[j].push_back({candidates[i], s});
             }
         });
     });
-
-    const double toIrradiance = 1.0 / (glm::pi<double>() * double(mRadius) * double(mRadius));
+    if (mDirect.size() < count) mDirect.resize(count);
     for (std::size_t j = 0; j < count; ++j) {
-        mSegmentList.clear();
+        const std::uint32_t r = mWalked[j];
+        std::size_t picked = 0;
         for (std::size_t c = 0; c < chunks; ++c)
-            mSegmentList.insert(mSegmentList.end(), mChunkLists[c * count + j].begin(),
-                                mChunkLists[c * count + j].end());
-        mStats.candidateSegments += mSegmentList.size();
-        const auto& receiver = mReceivers.receivers()[mobiles[j]];
-        accumulateDiscs(*mMobileDiscs[mobiles[j]], receiver.firstVertex, store.segments,
-                        mSegmentList, {}, 1.0, false);
-        const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
-        for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
-            mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
+            picked += mChunkLists[c * count + j].size();
+        // Whether a copy is worth its upkeep, for the walks to come: it costs about as much a
+        // frame per segment held as a walk does per candidate path (BENCHMARKS.md). A mobile
+        // that walked without one estimates what one would hold from the surface areas of the
+        // two boxes.
+        double held = double(picked);
+        if (!mWalkCopies[j]) {
+            const Aabb reach = mMobileBoxes[j];
+            held *= surfaceArea(nearBox(r, reach)) / surfaceArea(reach);
+        }
+        mCopyWorthIt[r] = held <= kNearCopiesPerWalkedPath * double(candidates.size());
+        if (mWalkCopies[j]) {
+            mPicks.clear();
+            for (std::size_t c = 0; c < chunks; ++c)
+                mPicks.insert(mPicks.end(), mChunkLists[c * count + j].begin(),
+                              mChunkLists[c * count + j].end());
+            mNear[r].build(store, mMobileBoxes[j], tail, mReceivers.receivers()[r].entity, mPicks);
+        } else {
+            mNear[r].clear();
+            mDirect[j].clear();
+            for (std::size_t c = 0; c < chunks; ++c)
+                for (const NearSegments::Pick& pick : mChunkLists[c * count + j])
+                    mDirect[j].push_back(pick.segment);
+        }
+    }
+}
+
+void DetpIrradianceSystem::updateNear(const PhotonDelta& delta) {
+    bool arranged = false;
+    for (std::uint32_t r = 0; r < mNear.size(); ++r) {
+        NearSegments& near = mNear[r];
+        if (!near.valid()) continue;
+        // Still too long, or moved out of it: dropped (a new one is made at its next move).
+        if ((!mIsMoved[r] && mNearIdle[r] >= kNearIdleFrames) ||
+            (mIsMoved[r] && !near.covers(discBounds(r)))) {
+            near.clear();
+            continue;
+        }
+        if (!mIsMoved[r]) ++mNearIdle[r];
+        if (delta.paths.empty()) continue;
+        if (!arranged) mDeltaByPath.arrange(delta);
+        arranged = true;
+        near.apply(delta, mDeltaByPath, mPrefixEnd, mPathLight, mNearScratch);
     }
 }
 
@@ -446,8 +557,11 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     if (full) {
         std::fill(mPowerSum.begin(), mPowerSum.end(), CompensatedSum{});
         std::fill(mUpdateCount.begin(), mUpdateCount.end(), 0u);
+        for (NearSegments& near : mNear)
+            near.clear(); // copies of a ray set that is no more
         listCountedSegments(store, mSegmentList);
-        accumulateDiscs(*mStaticDiscs, 0, store.segments, mSegmentList, {}, 1.0, false);
+        accumulateDiscs(*mStaticDiscs, 0, store.segments, store.segments.power.data(), mSegmentList,
+                        {}, 1.0, false);
         for (std::uint32_t v = 0; v < mReceivers.staticVertexCount(); ++v)
             mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
         mAllMobiles.clear();
@@ -465,8 +579,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mStats.deltaSegments = delta.oldSegments.size() + delta.newSegments.size();
         splitDelta(store, delta);
         for (const DeltaPart& part : mDeltaParts)
-            accumulateDiscs(*mStaticDiscs, 0, *part.segments, part.indices, part.beyond, part.sign,
-                            true);
+            accumulateDiscs(*mStaticDiscs, 0, *part.segments, part.segments->power.data(),
+                            part.indices, part.beyond, part.sign, true);
         // Mobiles that kept their pose take the same update, from the delta segments near them.
         const float tail = crossingTail();
         for (std::uint32_t r = 0; r < receivers.size(); ++r) {
@@ -486,7 +600,8 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
                     mBeyondList.push_back(part.beyond[k]);
                 }
                 accumulateDiscs(*mMobileDiscs[r], receivers[r].firstVertex, *part.segments,
-                                mSegmentList, mBeyondList, part.sign, true);
+                                part.segments->power.data(), mSegmentList, mBeyondList, part.sign,
+                                true);
             }
         }
     }
@@ -499,6 +614,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     mStats.verticesWritten = mTouched.size();
     timer.emplace(profiler, "mobiles", mStats.mobileMs);
 
+    updateNear(delta);
     estimateMobiles(registry, store, mMoved);
     for (const std::uint32_t r : mMoved) {
         mReceivers.publishReceiver(registry, mIrradiance, r);

@@ -7,6 +7,7 @@
 #include "systems/detp/DiscCrossing.h"
 #include "systems/detp/DiscIndex.h"
 #include "systems/detp/ImpactCounter.h"
+#include "systems/detp/NearSegments.h"
 #include "systems/detp/PhotonKdTree.h"
 #include "systems/detp/ReceiverSet.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -42,7 +43,11 @@ struct PhotonSegments;
  *     PhotonDelta::movedMobiles) are re-estimated in full at the new pose from the segments of
  *     the paths the PhotonPathGrid finds near the mobile, so the whole ray set is never
  *     scanned. Without a PhotonPathGrid resource that indexes the current ray set (none is
- *     built with PhotonSettings::fullRecompute) every stored path is a candidate;
+ *     built with PhotonSettings::fullRecompute) every stored path is a candidate. A mobile
+ *     keeps a copy of the segments near it (NearSegments, over a box a margin wider than its
+ *     reach) while that costs less to keep up than the walk over the paths costs
+ *     (kNearCopiesPerWalkedPath): the moves that stay inside the box read the copy, which each
+ *     delta updates, and neither query the grid nor walk the store;
  *   - a mobile taken out of the light (MobileMesh::active) holds zero until it is put back,
  *     which re-estimates it like a move. The same holds for the comparison estimators.
  *  A segment that starts on a convex mobile (ReceiverSet::Receiver::convex) is not traced
@@ -89,8 +94,10 @@ public:
         bool full = false;                 ///< every vertex was estimated from scratch
         std::size_t deltaSegments = 0;     ///< old + new segments traced incrementally
         std::size_t movedMobiles = 0;      ///< mobiles re-estimated in full
-        std::size_t candidatePaths = 0;    ///< paths looked at for them (PhotonPathGrid)
-        std::size_t candidateSegments = 0; ///< their segments that reach the mobile, traced
+        std::size_t mobilesWalked = 0;     ///< of them, those that walked the paths near them
+        std::size_t candidatePaths = 0;    ///< paths those walks read (PhotonPathGrid)
+        std::size_t nearSegments = 0;      ///< segments in the others' copies, scanned
+        std::size_t candidateSegments = 0; ///< of them, those that reach the mobile, traced
         std::size_t crossings = 0;         ///< (segment, disc) pairs applied
         std::size_t verticesWritten = 0;
         double deltaMs = 0;  ///< wall-clock: the delta applied to static and unmoved vertices
@@ -151,9 +158,20 @@ private:
     /// Every live segment of the store that counts, path by path (re-traced paths leave
     /// garbage behind in the segment array).
     void listCountedSegments(const PhotonStore& store, std::vector<std::uint32_t>& out) const;
-    void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex,
-                         const PhotonSegments& segments, std::span<const std::uint32_t> indices,
+    void accumulateDiscs(DiscIndex& discs, std::uint32_t firstVertex, SegmentRays segments,
+                         Strided<glm::vec3> power, std::span<const std::uint32_t> indices,
                          std::span<const float> beyond, double sign, bool incremental);
+    /// The box a mobile's new copy of the segments near it covers: its discs' reach `reach`,
+    /// widened by DetpSettings::nearSegmentMargin (or more when it moves fast).
+    Aabb nearBox(std::uint32_t receiver, const Aabb& reach) const;
+    /// Walks the paths near the mobiles mWalked, over mMobileBoxes: one path-grid query and one
+    /// walk for all of them (a path near several mobiles is read once). Each takes a new copy
+    /// of the segments near it (mWalkCopies) or its segments' store indices (mDirect), and
+    /// learns whether a copy is worth keeping (mCopyWorthIt).
+    void walkNear(const Registry& registry, const PhotonStore& store);
+    /// Brings every mobile's copy up to date with the delta (after splitDelta), and drops the
+    /// copies of mobiles that moved out of them or have been still for kNearIdleFrames.
+    void updateNear(const PhotonDelta& delta);
     /// Re-estimates the listed mobile receivers in full against the current ray set; inactive
     /// ones are zeroed.
     void estimateMobiles(const Registry& registry, const PhotonStore& store,
@@ -207,9 +225,23 @@ private:
     std::vector<std::uint32_t> mSegmentList;
     std::vector<std::uint32_t> mCandidatePaths;
     std::vector<std::uint32_t> mAllPaths; ///< 0, 1, ...: the candidates without a path grid
-    std::vector<std::vector<std::uint32_t>> mChunkLists; ///< per task and mobile, estimateMobiles
-    std::vector<Aabb> mMobileBoxes;                      ///< estimateMobiles: per mobile
-    std::vector<Entity> mLeavesFrom;                     ///< estimateMobiles: per mobile
+    /// Per receiver: the stored segments near a mobile that moved lately (NearSegments), the
+    /// reach of its discs when it was last estimated, and the frames it has been still since.
+    std::vector<NearSegments> mNear;
+    std::vector<Aabb> mLastReach;
+    std::vector<std::uint32_t> mNearIdle;
+    std::vector<std::uint8_t> mCopyWorthIt; ///< per receiver: keep a copy (learnt by walks)
+    NearSegments mNearScratch;
+    DeltaByPath mDeltaByPath;
+    // walkNear: per mobile walked, its receiver, whether it takes a copy, its box, what its
+    // segments may not start on, and its store indices when it takes no copy.
+    std::vector<std::uint32_t> mWalked;
+    std::vector<std::uint8_t> mWalkCopies;
+    std::vector<Aabb> mMobileBoxes;
+    std::vector<Entity> mLeavesFrom;
+    std::vector<std::vector<std::uint32_t>> mDirect;
+    std::vector<std::vector<NearSegments::Pick>> mChunkLists; ///< walkNear: per task and mobile
+    std::vector<NearSegments::Pick> mPicks;
     std::vector<std::uint32_t> mAllMobiles;              ///< receiver indices, full estimates
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;

@@ -59,6 +59,9 @@ void validate(const DetpSettings& settings) {
              ": must be a finite number of metres >= 0 (0: default)");
     if (settings.maxIncrementalUpdates == 0)
         fail("DetpSettings.maxIncrementalUpdates = 0: must be at least 1");
+    if (!(settings.nearSegmentMargin >= 0.f && settings.nearSegmentMargin <= 1.f))
+        fail("DetpSettings.nearSegmentMargin = ", settings.nearSegmentMargin,
+             ": must be a share of a mobile's size from 0 (no copy) to 1");
 }
 
 } // namespace qgi

@@ -84,7 +84,7 @@ void DiscIndex::updateBox() {
 struct DiscIndex::QueryContext {
     RTCIntersectContext embree; // first: Embree hands the filter a pointer to it
     const DiscIndex* index = nullptr;
-    const PhotonSegments* segments = nullptr;
+    SegmentRays segments{{}, {}, {}};
     const std::uint32_t* indices = nullptr;
     const float* beyond = nullptr; ///< per index, or null: whole segments
     std::size_t count = 0;
@@ -683,7 +683,7 @@ void DiscIndex::move(std::span<const glm::vec3> centers, std::span<const glm::ve
 void DiscIndex::consider(const QueryContext& query, std::uint32_t position, std::uint32_t s,
                          std::uint32_t disc, const glm::vec3& center, const glm::vec3& normal) {
     const DiscIndex& index = *query.index;
-    const PhotonSegments& segments = *query.segments;
+    const SegmentRays& segments = query.segments;
     const float t = discCrossing(segments.origin[s], segments.direction[s], segments.length[s],
                                  center, normal, index.mRadius);
     if (t < 0.f) return;
@@ -726,8 +726,8 @@ void DiscIndex::recordCrossings(const RTCFilterFunctionNArguments* args) {
 
 void DiscIndex::crossPlane(const QueryContext& query, std::uint32_t position, std::uint32_t s,
                            const Plane& plane, const double* range) {
-    const glm::vec3& o = query.segments->origin[s];
-    const glm::vec3& d = query.segments->direction[s];
+    const glm::vec3& o = query.segments.origin[s];
+    const glm::vec3& d = query.segments.direction[s];
     glm::dvec2 uv;
     if (plane.tilted) {
         QGI_ASSERT(range, "tilted planes are queried directly");
@@ -787,7 +787,7 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
     QueryContext context = query;
     context.pairs = &pairs;
 
-    const PhotonSegments& segments = *query.segments;
+    const SegmentRays& segments = query.segments;
     const std::size_t begin = chunk * kChunkSize;
     const std::size_t end = std::min(query.count, begin + kChunkSize);
     const double slack = double(kEmbreeSlack) * mRadius;
@@ -850,8 +850,11 @@ void DiscIndex::traceChunk(const QueryContext& query, std::size_t chunk) {
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
 }
 
-void DiscIndex::collectCrossings(const PhotonSegments& segments,
-                                 std::span<const std::uint32_t> indices,
+SegmentRays::SegmentRays(const PhotonSegments& segments)
+    : origin(segments.origin.data()), direction(segments.direction.data()),
+      length(segments.length.data()) {}
+
+void DiscIndex::collectCrossings(SegmentRays segments, std::span<const std::uint32_t> indices,
                                  std::vector<DiscCrossing>& out, std::span<const float> beyond) {
     QGI_ASSERT(beyond.empty() || beyond.size() == indices.size(), "one length per index");
     out.clear();
@@ -862,7 +865,7 @@ void DiscIndex::collectCrossings(const PhotonSegments& segments,
     QueryContext query;
     rtcInitIntersectContext(&query.embree);
     query.index = this;
-    query.segments = &segments;
+    query.segments = segments;
     query.indices = indices.data();
     query.beyond = beyond.empty() ? nullptr : beyond.data();
     query.count = indices.size();

@@ -8,6 +8,7 @@
 #include <glm/vec4.hpp>
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -17,6 +18,31 @@ namespace qgi {
 
 class EmbreeDevice;
 struct PhotonSegments;
+
+/// Read-only elements `stride` bytes apart: one field of an array of records, or a plain array.
+template <typename T> struct Strided {
+    const std::byte* base = nullptr;
+    std::size_t stride = sizeof(T);
+
+    Strided() = default;
+    Strided(const T* first, std::size_t bytes = sizeof(T))
+        : base(reinterpret_cast<const std::byte*>(first)), stride(bytes) {}
+    const T& operator[](std::size_t i) const {
+        return *reinterpret_cast<const T*>(base + i * stride);
+    }
+};
+
+/// What a disc query reads of a set of segments: per segment its origin, unit direction and
+/// length (+inf: it left the scene). A PhotonSegments converts to one, and so do the records of
+/// NearSegments' copies.
+struct SegmentRays {
+    Strided<glm::vec3> origin, direction;
+    Strided<float> length;
+
+    SegmentRays(Strided<glm::vec3> origins, Strided<glm::vec3> directions, Strided<float> lengths)
+        : origin(origins), direction(directions), length(lengths) {}
+    SegmentRays(const PhotonSegments& segments); ///< implicit: every PhotonSegments is one
+};
 
 /** Finds every (segment, disc) pair that crossesDisc() accepts, for many discs of one radius
  *  (seed 000 section 2.7, disc indexing), with Embree.
@@ -131,9 +157,8 @@ public:
     /// in the order described in the class comment; `out` is overwritten. `beyond`, when not
     /// empty, holds one length per index: segment indices[k] then counts only the discs it
     /// crosses and a copy of it cut at length beyond[k] does not (-inf: the whole segment).
-    void collectCrossings(const PhotonSegments& segments, std::span<const std::uint32_t> indices,
-                          std::vector<DiscCrossing>& out,
-                          std::span<const float> beyond = {});
+    void collectCrossings(SegmentRays segments, std::span<const std::uint32_t> indices,
+                          std::vector<DiscCrossing>& out, std::span<const float> beyond = {});
 
     std::size_t size() const { return mCenters.size(); }
     float radius() const { return mRadius; }

@@ -10,6 +10,8 @@
 //    the same frame with fullRecompute (every photon re-shot, every vertex re-estimated).
 //    Counters split the frame into its stages (ms per frame). The argument is the path grid's
 //    resolution (0: the default), swept for MobileUpdate: memory against candidates and time.
+//  - MobileTravel/<scene>: the same frames with the mobiles travelling 20 cm before they
+//    turn back instead of 5 cm.
 //  - MobileUpdatePhotons/cornell/<photons> and FullReshootPhotons/cornell/<photons>: the same
 //    pair at 125k, 250k and 500k photons: the photon count that fits a frame budget.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
@@ -134,13 +136,13 @@ struct PhotonWorld {
             .count();
     }
 
-    /// Every mobile 1 cm further along x, turning back after 5 cm (or, with `toggle`, taken out
-    /// of the world or put back: MobileMesh::active); then the frame's update. Returns the
-    /// milliseconds DETP took.
-    double step(bool toggle = false) {
+    /// Every mobile 1 cm further along x, turning back after `turn` cm (or, with `toggle`,
+    /// taken out of the world or put back: MobileMesh::active); then the frame's update.
+    /// Returns the milliseconds DETP took.
+    double step(bool toggle = false, int turn = 5) {
         ++frame;
-        const int phase = int(frame % 10);
-        const float offset = 0.01f * float(phase <= 5 ? phase : 10 - phase);
+        const int phase = int(frame % std::uint64_t(2 * turn));
+        const float offset = 0.01f * float(phase <= turn ? phase : 2 * turn - phase);
         for (std::size_t i = 0; i < mobiles.size(); ++i)
             if (toggle)
                 registry.patch<MobileMesh>(mobiles[i]).active = frame % 2 == 0;
@@ -512,13 +514,15 @@ void BM_LampRedealt(benchmark::State& state, const std::string& name) {
     reportSweeps(state, on, off);
 }
 
-/// Frames of the mobiles moving 1 cm each, with each stage's time and counts as counters.
-void moveMobiles(benchmark::State& state, PhotonWorld& w) {
+/// Frames of the mobiles moving 1 cm each, turning back after `turn` cm, with each stage's
+/// time and counts as counters.
+void moveMobiles(benchmark::State& state, PhotonWorld& w, int turn = 5) {
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
            trace = 0, grid = 0, detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0,
-           mobileSegments = 0, crossings = 0, deltaSegments = 0;
+           mobileSegments = 0, crossings = 0, deltaSegments = 0, nearSegments = 0,
+           mobilesWalked = 0;
     for (auto _ : state) {
-        detp += w.step();
+        detp += w.step(false, turn);
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
         retraced += double(stats.retracedPaths);
         landed += double(stats.landedPaths);
@@ -532,6 +536,8 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w) {
         detpMobile += w.irradiance->lastFrame().mobileMs;
         mobilePaths += double(w.irradiance->lastFrame().candidatePaths);
         mobileSegments += double(w.irradiance->lastFrame().candidateSegments);
+        nearSegments += double(w.irradiance->lastFrame().nearSegments);
+        mobilesWalked += double(w.irradiance->lastFrame().mobilesWalked);
         crossings += double(w.irradiance->lastFrame().crossings);
         deltaSegments += double(w.irradiance->lastFrame().deltaSegments);
     }
@@ -547,6 +553,8 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w) {
     state.counters["detp_mobiles_ms"] = detpMobile / frames;
     state.counters["detp_mobile_paths"] = mobilePaths / frames;
     state.counters["detp_mobile_segments"] = mobileSegments / frames;
+    state.counters["detp_near_segments"] = nearSegments / frames;
+    state.counters["detp_mobiles_walked"] = mobilesWalked / frames;
     state.counters["detp_crossings"] = crossings / frames;
     state.counters["detp_delta_segments"] = deltaSegments / frames;
 }
@@ -554,6 +562,12 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w) {
 /// Argument: the path grid's resolution (0: the default).
 void BM_MobileUpdate(benchmark::State& state, const std::string& name, bool fullRecompute) {
     moveMobiles(state, world(name, fullRecompute, std::uint32_t(state.range(0))));
+}
+
+/// The same frames, the mobiles travelling 20 cm before they turn: each leaves the copy of
+/// the segments near it now and then (NearSegments), which a 5 cm sway never does.
+void BM_MobileTravel(benchmark::State& state, const std::string& name) {
+    moveMobiles(state, world(name), 20);
 }
 
 /// Argument: the photon count, the path grid at its default resolution.
@@ -586,6 +600,9 @@ int main(int argc, char** argv) {
             ->Arg(16)
             ->Arg(32)
             ->Arg(48)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
+        RegisterBenchmark(id("MobileTravel").c_str(), BM_MobileTravel, scene)
             ->UseRealTime()
             ->Unit(benchmark::kMillisecond);
         RegisterBenchmark((id("AlbedoEdit") + "/mobile").c_str(), BM_AlbedoEdit, scene, "")

@@ -551,6 +551,15 @@ std::vector<Segment> randomPath(std::mt19937& rng, const IncrementalWorld& world
     }
 }
 
+/// `count` random paths from random points in the upper part of the unit box.
+void appendRandomPaths(std::mt19937& rng, IncrementalWorld& world, int count) {
+    PhotonStore& store = world.registry.ctx().get<PhotonStore>();
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    for (int i = 0; i < count; ++i)
+        appendPath(store,
+                   randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+}
+
 /// A frame of the quasi-static update done by hand: some paths get a new suffix from a random
 /// segment on; the delta holds the old and new suffixes; the store gets the re-traced paths at
 /// its end (their old ranges become garbage, as in the photon store).
@@ -637,11 +646,7 @@ void expectIncrementalEqualsFull(bool headsStopOnPlate) {
     std::mt19937 rng(99);
     std::uniform_real_distribution<float> unit(0.f, 1.f);
     PhotonStore& store = registry.ctx().get<PhotonStore>();
-    for (int i = 0; i < 3000; ++i) {
-        const auto path =
-            randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0);
-        appendPath(store, path);
-    }
+    appendRandomPaths(rng, world, 3000);
     DetpSettings settings;
     settings.discRadius = IncrementalWorld::kRadius;
     DetpIrradianceSystem system(settings);
@@ -751,6 +756,134 @@ TEST(Detp, IncrementalEqualsFullAfter100RandomUpdates) {
 
 TEST(Detp, IncrementalEqualsFullWhenDeltasStartOnAConvexMobile) {
     expectIncrementalEqualsFull(true);
+}
+
+/// Two DETP systems over one world: `kept` keeps copies of the segments near moved mobiles
+/// (NearSegments, the default), `walked` walks the paths near them at every move.
+struct KeptAndWalked {
+    DetpIrradianceSystem kept{settings(DetpSettings{}.nearSegmentMargin)};
+    DetpIrradianceSystem walked{settings(0.f)};
+
+    static DetpSettings settings(float margin) {
+        DetpSettings s;
+        s.discRadius = IncrementalWorld::kRadius;
+        s.nearSegmentMargin = margin;
+        return s;
+    }
+    /// Builds both and makes their first (full) estimates.
+    explicit KeptAndWalked(Registry& registry) {
+        kept.build(registry);
+        walked.build(registry);
+        kept.update(registry, {});
+        walked.update(registry, {});
+        registry.clearChanges();
+    }
+    /// A frame of both; whether `mobile`'s irradiance came out the same bit for bit.
+    bool update(Registry& registry, Entity mobile) {
+        kept.update(registry, {});
+        const std::vector<glm::vec3> fromKept = registry.get<VertexIrradiance>(mobile).irradiance;
+        walked.update(registry, {});
+        const auto& fromWalk = registry.get<VertexIrradiance>(mobile).irradiance;
+        registry.clearChanges();
+        return std::memcmp(fromKept.data(), fromWalk.data(), fromWalk.size() * sizeof(glm::vec3)) ==
+               0;
+    }
+};
+
+TEST(Detp, AMovingMobilesCopyOfTheSegmentsNearItGivesTheWalksSumsBitForBit) {
+    // The plate drifts a centimetre or two a frame while random deltas re-trace paths all over
+    // the box (their heads stopping on the plate, so the segments that leave it are skipped).
+    // One system keeps a copy of the segments near the plate and updates it from each delta
+    // (NearSegments); the other walks every path at every move. The plate's irradiance must be
+    // the same bit for bit at every frame.
+    IncrementalWorld world;
+    world.stopper = world.plate;
+    Registry& registry = world.registry;
+    std::mt19937 rng(41);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    appendRandomPaths(rng, world, 3000);
+    KeptAndWalked systems(registry);
+    const DetpIrradianceSystem& kept = systems.kept;
+    const DetpIrradianceSystem& walked = systems.walked;
+
+    glm::vec3 position(0.5f, 0.3f, 0.5f);
+    std::size_t moves = 0, rebuilds = 0, fromCopy = 0, crossings = 0;
+    for (int frame = 1; frame <= 150; ++frame) {
+        randomDelta(rng, world, 1 + std::size_t(unit(rng) * 40.f));
+        // Still for 20 frames once (its copy is dropped after kNearIdleFrames), and every
+        // seventh frame.
+        const bool still = frame % 7 == 0 || (frame > 60 && frame <= 80);
+        if (!still) {
+            position += glm::vec3(0.02f * unit(rng) - 0.01f, 0.f, 0.02f * unit(rng));
+            if (position.z > 0.75f) position.z = 0.25f; // a jump now and then
+            registry.patch<WorldTransform>(world.plate).matrix =
+                glm::translate(kIdentity, position);
+        }
+        ASSERT_TRUE(systems.update(registry, world.plate)) << "frame " << frame;
+        ASSERT_FALSE(kept.lastFrame().full);
+        ASSERT_EQ(kept.lastFrame().movedMobiles, still ? 0u : 1u) << "frame " << frame;
+        if (still) continue;
+        ++moves;
+        rebuilds += kept.lastFrame().mobilesWalked;
+        // Without a rebuild no path is walked: the copy alone is read.
+        if (kept.lastFrame().mobilesWalked == 0) {
+            EXPECT_EQ(kept.lastFrame().candidatePaths, 0u);
+            ++fromCopy;
+        }
+        EXPECT_EQ(walked.lastFrame().mobilesWalked, 1u);
+        EXPECT_EQ(walked.lastFrame().candidatePaths, store.pathCount());
+        EXPECT_EQ(kept.lastFrame().candidateSegments, walked.lastFrame().candidateSegments);
+        crossings += kept.lastFrame().crossings;
+    }
+    // Most moves read the copy; it was made anew after the plate's jumps, after the still
+    // spell, and when the drift took the plate out of it.
+    EXPECT_GT(fromCopy, moves / 2);
+    EXPECT_GE(rebuilds, 4u);
+    EXPECT_GT(crossings, 10'000u);
+}
+
+TEST(Detp, AMobileWhoseCopyWouldOutgrowItsWalkKeepsNone) {
+    // Every path bounces six times straight through the plate's neighbourhood: a copy of the
+    // segments near the plate would hold six per path a walk reads, more than it is worth
+    // (kNearCopiesPerWalkedPath). The first estimate makes one, learns that and drops it; the
+    // moves after walk the paths without one. The sums stay those of a walk, bit for bit.
+    IncrementalWorld world;
+    Registry& registry = world.registry;
+    PhotonStore& store = registry.ctx().get<PhotonStore>();
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> unit(0.f, 1.f);
+    for (int i = 0; i < 2000; ++i) {
+        const float x = 0.3f + 0.4f * unit(rng), z = 0.3f + 0.4f * unit(rng);
+        std::vector<Segment> path;
+        for (std::uint8_t k = 0; k < 6; ++k) {
+            const bool down = k % 2 == 0;
+            path.push_back({{x, down ? 0.6f : 0.f, z},
+                            {0.f, down ? -1.f : 1.f, 0.f},
+                            0.6f,
+                            glm::vec3(1e-3f),
+                            world.floor,
+                            0,
+                            k});
+        }
+        appendPath(store, path);
+    }
+    KeptAndWalked systems(registry);
+    const DetpIrradianceSystem& kept = systems.kept;
+    ASSERT_TRUE(kept.lastFrame().full);
+    EXPECT_EQ(kept.lastFrame().mobilesWalked, 1u);
+    EXPECT_EQ(kept.lastFrame().nearSegments, store.segments.size()); // every segment
+    EXPECT_EQ(systems.walked.lastFrame().nearSegments, 0u);
+    for (int frame = 1; frame <= 3; ++frame) {
+        registry.patch<WorldTransform>(world.plate).matrix =
+            glm::translate(kIdentity, {0.5f + 0.01f * float(frame), 0.3f, 0.5f});
+        registry.ctx().get<PhotonDelta>() = PhotonDelta{};
+        ASSERT_TRUE(systems.update(registry, world.plate)) << "frame " << frame;
+        EXPECT_EQ(kept.lastFrame().mobilesWalked, 1u) << "frame " << frame;
+        EXPECT_EQ(kept.lastFrame().candidatePaths, store.pathCount());
+        EXPECT_EQ(kept.lastFrame().nearSegments, 0u) << "frame " << frame; // no copy
+        EXPECT_GT(kept.lastFrame().crossings, 1000u);
+    }
 }
 
 TEST(Detp, DriftPolicySchedulesAFullReestimate) {
@@ -916,11 +1049,7 @@ TEST(Detp, EachDeltaIsAppliedOnceAndAMissedOneForcesAFullEstimate) {
     IncrementalWorld world;
     Registry& registry = world.registry;
     std::mt19937 rng(12);
-    std::uniform_real_distribution<float> unit(0.f, 1.f);
-    PhotonStore& store = registry.ctx().get<PhotonStore>();
-    for (int i = 0; i < 500; ++i)
-        appendPath(store,
-                   randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+    appendRandomPaths(rng, world, 500);
     DetpSettings settings;
     settings.discRadius = IncrementalWorld::kRadius;
     DetpIrradianceSystem system(settings);
@@ -1355,11 +1484,7 @@ TEST(Detp, SameInputGivesBitIdenticalOutputOnAnyThreadCount) {
         tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
         IncrementalWorld world;
         std::mt19937 rng(5);
-        std::uniform_real_distribution<float> unit(0.f, 1.f);
-        PhotonStore& store = world.registry.ctx().get<PhotonStore>();
-        for (int i = 0; i < 20'000; ++i)
-            appendPath(store,
-                       randomPath(rng, world, {unit(rng), 0.2f + 0.8f * unit(rng), unit(rng)}, 0));
+        appendRandomPaths(rng, world, 20'000);
         DetpSettings settings;
         settings.discRadius = IncrementalWorld::kRadius;
         DetpIrradianceSystem system(settings);
