@@ -2,6 +2,7 @@
 
 #include <glm/common.hpp>
 #include <glm/vec3.hpp>
+#include <glm/vector_relational.hpp>
 
 #include <algorithm>
 #include <limits>
@@ -28,6 +29,12 @@ struct Aabb {
     glm::vec3 center() const { return 0.5f * (min + max); }
     glm::vec3 extent() const { return max - min; }
 };
+
+/// Whether `outer` holds `inner`.
+inline bool contains(const Aabb& outer, const Aabb& inner) {
+    return glm::all(glm::lessThanEqual(outer.min, inner.min)) &&
+           glm::all(glm::lessThanEqual(inner.max, outer.max));
+}
 
 /// The part [near, far] of origin + t * direction, t in [near, far] on entry, inside the box
 /// [low, high] (slab test); empty when near > far on return. T is the arithmetic: double

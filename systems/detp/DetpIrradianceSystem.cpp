@@ -354,19 +354,9 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
 }
 
 Aabb DetpIrradianceSystem::nearBox(std::uint32_t receiver, const Aabb& reach) const {
-    const glm::vec3 size = reach.extent();
-    const float largest = std::max({size.x, size.y, size.z});
-    float margin = mSettings.nearSegmentMargin * largest;
-    // A mobile moving steadily leaves its copy after kNearMotionFrames moves at the least; one
-    // that jumped by more than an eighth of its size is not moving steadily.
-    if (const Aabb& last = mLastReach[receiver]; !last.empty()) {
-        const float motion = kNearMotionFrames * glm::length(reach.center() - last.center());
-        if (motion <= largest) margin = std::max(margin, motion);
-    }
-    Aabb box = reach;
-    box.min -= glm::vec3(margin);
-    box.max += glm::vec3(margin);
-    return box;
+    const Aabb& last = mLastReach[receiver];
+    return neighbourhoodBox(reach, mSettings.nearSegmentMargin,
+                            last.empty() ? glm::vec3(0.f) : reach.center() - last.center());
 }
 
 namespace {

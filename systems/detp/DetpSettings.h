@@ -44,21 +44,16 @@ struct DetpSettings {
     std::uint32_t maxIncrementalUpdates = 1u << 30;
     /// A moved mobile keeps a copy of the stored segments near it (NearSegments) over a box
     /// this share of its size wider on every side than its discs' reach, or more when it moves
-    /// fast (kNearMotionFrames times its last move, up to its size), so that the moves that follow
+    /// fast (neighbourhoodBox), so that the moves that follow
     /// read the copy instead of querying the path grid and walking the store. 0: no copy is kept,
     /// every move walks the store. At most 1.
     float nearSegmentMargin = 0.125f;
 };
 
-/// A moved mobile's copy of the segments near it reaches at least this many of its last move
-/// past its discs' reach (DetpSettings::nearSegmentMargin).
-inline constexpr float kNearMotionFrames = 8.f;
 /// A mobile keeps a copy of the segments near it while it holds at most this many segments per
 /// path its last walk read: each costs about as much a frame to keep up (apply, select) as a
 /// candidate path costs to walk (BENCHMARKS.md, "Copies of the segments near a mobile").
 inline constexpr double kNearCopiesPerWalkedPath = 1.0;
-/// A copy of the segments near a mobile that has not moved for this many frames is dropped.
-inline constexpr std::uint32_t kNearIdleFrames = 16;
 
 /// Default search cap of the photon map, in disc radii: wide enough that k = 50 hit points are
 /// found wherever a DETP disc would count about 3 or more segments.

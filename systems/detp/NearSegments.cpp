@@ -1,6 +1,7 @@
 #include "systems/detp/NearSegments.h"
 
 #include "runtime/core/Error.h"
+#include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
 
 #include <oneapi/tbb/blocked_range.h>
@@ -39,8 +40,7 @@ void DeltaByPath::arrange(const PhotonDelta& delta) {
 }
 
 bool NearSegments::covers(const Aabb& box) const {
-    return mValid && glm::all(glm::lessThanEqual(mBox.min, box.min)) &&
-           glm::all(glm::lessThanEqual(box.max, mBox.max));
+    return mValid && contains(mBox, box);
 }
 
 std::size_t NearSegments::memoryBytes() const {

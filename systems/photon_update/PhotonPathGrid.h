@@ -4,9 +4,11 @@
 #include "runtime/scene/SceneInfo.h"
 #include "systems/photon_update/PhotonStore.h"
 
+#include <glm/geometric.hpp>
 #include <glm/vec3.hpp>
 #include <oneapi/tbb/enumerable_thread_specific.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <mutex>
 #include <span>
@@ -14,6 +16,31 @@
 #include <vector>
 
 namespace qgi {
+
+/// A moving object's neighbourhood box reaches at least this many of its last move past what
+/// it needs now (neighbourhoodBox).
+inline constexpr float kNeighbourhoodMotionFrames = 8.f;
+
+/// What is kept near a moving object (neighbourhoodBox) is dropped once it has been still for
+/// this many frames.
+inline constexpr std::uint32_t kNearIdleFrames = 16;
+
+/** The box a moving object keeps what lies near it over (DETP's NearSegments, the photon
+ *  update's near paths), so that the frames that follow need no path-grid query while what
+ *  they need stays inside it: `need` widened on every side by `share` of its largest side, or
+ *  by kNeighbourhoodMotionFrames times `lastMove` (the object's last displacement) when that
+ *  is more but no more than the largest side (a longer jump is not steady motion).        */
+inline Aabb neighbourhoodBox(const Aabb& need, float share, const glm::vec3& lastMove) {
+    const glm::vec3 size = need.extent();
+    const float largest = std::max({size.x, size.y, size.z});
+    float margin = share * largest;
+    const float motion = kNeighbourhoodMotionFrames * glm::length(lastMove);
+    if (motion <= largest) margin = std::max(margin, motion);
+    Aabb box = need;
+    box.min -= glm::vec3(margin);
+    box.max += glm::vec3(margin);
+    return box;
+}
 
 /** World resource: which photon paths pass through which part of space, so that finding the
  *  paths a moved mobile may touch costs in proportion to the paths near it, not to the ray set.

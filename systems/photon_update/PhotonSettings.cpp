@@ -44,6 +44,9 @@ void validatePhotonSettings(const PhotonSettings& s) {
     if (s.gridRefreshBudget == 0)
         fail("PhotonSettings.gridRefreshBudget = 0: the path index would never catch up");
     checkFraction(s.compactionFraction, "compactionFraction", 1.f);
+    if (!(s.nearPathMargin >= 0.f && s.nearPathMargin <= 1.f))
+        fail("PhotonSettings.nearPathMargin = ", s.nearPathMargin,
+             ": must be a share of a mobile's size from 0 (no near paths kept) to 1");
     const Aabb& box = s.directionalBounds;
     if (directionalBoundsSet(s)) { // set: a range on every axis
         for (int axis = 0; axis < 3; ++axis)

@@ -31,6 +31,12 @@ struct PhotonSettings {
     /// chunks, those with the most re-traced paths first), plus the paths the frame re-shot
     /// for lights that changed; until then a re-traced path is found by its bounding box.
     std::uint32_t gridRefreshBudget = 4096;
+    /// A moving mobile keeps the paths near it (those with a segment in a box this share of
+    /// its size wider on every side than its old and new bounds, or wider for fast motion:
+    /// neighbourhoodBox), updated from each frame's re-traced paths, so that its next moves
+    /// inside that box need no path-grid query and read only paths that come near it. 0: the
+    /// grid is queried at every move. At most 1.
+    float nearPathMargin = 0.125f;
     /// The store is laid out anew (every segment copied once) when its overflow exceeds this
     /// fraction of the live segments: re-traced paths that outgrew their store region's room,
     /// and what they left there. Garbage inside the regions is reclaimed a few regions a frame

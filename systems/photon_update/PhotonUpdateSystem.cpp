@@ -34,6 +34,9 @@ namespace {
 
 constexpr std::size_t kMaxLights = std::numeric_limits<std::uint16_t>::max(); // PhotonPath::light
 constexpr std::size_t kTestGrain = 256;       // candidate paths per task
+/// A moving mobile keeps its near paths while they are at most this share of the paths the
+/// grid hands out for the same box (PhotonSettings::nearPathMargin).
+constexpr double kNearPathsPerGridPath = 0.5;
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
 // A shot where more of the lit photons than this leave the scene at once is warned about.
 constexpr double kMostlyEscaped = 0.99;
@@ -147,9 +150,14 @@ Aabb scriptedSweep(const Registry& registry, Entity e, const Aabb& objectBounds)
     return scripted && e.isNull() ? box : Aabb{};
 }
 
-bool contains(const Aabb& outer, const Aabb& inner) {
-    return glm::all(glm::lessThanEqual(outer.min, inner.min)) &&
-           glm::all(glm::lessThanEqual(inner.max, outer.max));
+/// Whether a segment of path p meets `box`.
+bool pathMeetsBox(const PhotonStore& store, std::uint32_t p, const Aabb& box) {
+    const PhotonPath& path = store.paths[p];
+    const PhotonSegments& segments = store.segments;
+    for (std::uint32_t s = path.first; s < path.first + path.count; ++s)
+        if (segmentMeetsBox(segments.origin[s], segments.direction[s], segments.length[s], box))
+            return true;
+    return false;
 }
 
 /// The box widened past rounding (of transformed corners, of rays mapped to object space),
@@ -268,6 +276,7 @@ void PhotonUpdateSystem::update(Registry& registry, const FrameContext& /*frame*
         retrace(*scene, store, delta);
     }
     const StageTimer timer(profiler, "grid", mStats.gridMs);
+    updateNearPaths(delta); // an index too
     // A frame that leaves a large share of the paths changed for good (a repainted floor: its
     // paths will not change again next frame, as a moving mobile's do) rebuilds the grid:
     // re-indexed a budget at a time, they would leave every query testing their boxes for
@@ -678,6 +687,7 @@ void PhotonUpdateSystem::shootAll(const Registry& registry, const RayScene& scen
                                   PhotonStore& store, PhotonPathGrid& grid) {
     if (!mShot) captureScene(registry, scene);
     mShot = true;
+    mNearPaths.clear(); // paths of a ray set that is no more
     mStats.full = true;
 
     // Lights: an unchanged light keeps what was derived from it (no work, no repeated warning).
@@ -853,7 +863,10 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
             if (!box.empty()) mQueryBoxes.push_back(box);
     for (const AlbedoEdit& edit : mEdits)
         if (!edit.box.empty()) mQueryBoxes.push_back(edit.box);
-    grid.pathsOverlapping(mQueryBoxes, mCandidates);
+    if (mEdits.empty() && mSettings.nearPathMargin > 0.f)
+        candidatesNearMobiles(store, grid);
+    else
+        grid.pathsOverlapping(mQueryBoxes, mCandidates);
     mFirstAffected.resize(mCandidates.size());
 
     // Paths being re-shot anyway are skipped (-1).
@@ -890,6 +903,87 @@ void PhotonUpdateSystem::findAffectedPaths(const RayScene& scene, const PhotonSt
     }
     mStats.candidatePaths = mCandidates.size();
     mStats.retracedPaths = mJobs.size() - mStats.reshotPaths;
+}
+
+void PhotonUpdateSystem::candidatesNearMobiles(const PhotonStore& store,
+                                               const PhotonPathGrid& grid) {
+    mCandidates.clear();
+    mQueryBoxes.clear(); // of the mobiles that keep no near paths
+    for (const MovedMobile& m : mMoved) {
+        Aabb need = m.oldBox;
+        need.extend(m.newBox);
+        if (need.empty()) continue; // out of the world before and after
+        NearPaths& near = mNearPaths[m.entity];
+        near.idle = 0;
+        if (!near.worth) {
+            for (const Aabb& box : {m.oldBox, m.newBox})
+                if (!box.empty()) mQueryBoxes.push_back(box);
+            continue;
+        }
+        // Made anew when the mobile left its box, or when re-traced paths that no longer come
+        // near it have grown it by half.
+        if (!near.box.empty() && contains(near.box, need) &&
+            2 * near.paths.size() <= 3 * near.made + kTestGrain) {
+            mCandidates.insert(mCandidates.end(), near.paths.begin(), near.paths.end());
+            continue;
+        }
+        near.box = neighbourhoodBox(need, mSettings.nearPathMargin, m.shift);
+        grid.pathsOverlapping(near.box, mNearScratch);
+        mNearMeets.resize(mNearScratch.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mNearScratch.size(), kTestGrain),
+                          [&](const tbb::blocked_range<std::size_t>& range) {
+                              walkPathsPrefetched(store, mNearScratch, range.begin(), range.end(),
+                                                  [&](std::size_t i) {
+                                                      mNearMeets[i] = pathMeetsBox(
+                                                          store, mNearScratch[i], near.box);
+                                                  });
+                          });
+        near.paths.clear();
+        for (std::size_t i = 0; i < mNearScratch.size(); ++i)
+            if (mNearMeets[i]) near.paths.push_back(mNearScratch[i]);
+        near.made = near.paths.size();
+        ++mStats.nearPathsMade;
+        mCandidates.insert(mCandidates.end(), near.paths.begin(), near.paths.end());
+        // Worth keeping only where the grid's cells hand out many paths that do not come near
+        // (a mobile small against the cells); a big mobile's near paths churn as fast as it
+        // re-traces them, and would cost more to keep up than the grid's query.
+        near.worth = double(near.made) <= kNearPathsPerGridPath * double(mNearScratch.size());
+        if (!near.worth) near.paths = {};
+    }
+    if (!mQueryBoxes.empty()) {
+        grid.pathsOverlapping(mQueryBoxes, mNearScratch);
+        mCandidates.insert(mCandidates.end(), mNearScratch.begin(), mNearScratch.end());
+    }
+    if (mMoved.size() > 1) { // increasing, each once, as the grid hands them out
+        std::sort(mCandidates.begin(), mCandidates.end());
+        mCandidates.erase(std::unique(mCandidates.begin(), mCandidates.end()), mCandidates.end());
+    }
+}
+
+void PhotonUpdateSystem::updateNearPaths(const PhotonDelta& delta) {
+    for (auto it = mNearPaths.begin(); it != mNearPaths.end();) {
+        NearPaths& near = it->second;
+        if (++near.idle > kNearIdleFrames) {
+            it = mNearPaths.erase(it);
+            continue;
+        }
+        mNearAdded.clear();
+        for (std::size_t i = 0; near.worth && i < delta.paths.size(); ++i)
+            for (std::uint32_t s = delta.newFirst[i]; s < delta.newFirst[i + 1]; ++s)
+                if (segmentMeetsBox(delta.newSegments.origin[s], delta.newSegments.direction[s],
+                                    delta.newSegments.length[s], near.box)) {
+                    mNearAdded.push_back(delta.paths[i]);
+                    break;
+                }
+        if (!mNearAdded.empty()) {
+            std::sort(mNearAdded.begin(), mNearAdded.end());
+            mNearScratch.clear();
+            std::set_union(near.paths.begin(), near.paths.end(), mNearAdded.begin(),
+                           mNearAdded.end(), std::back_inserter(mNearScratch));
+            std::swap(near.paths, mNearScratch);
+        }
+        ++it;
+    }
 }
 
 std::int32_t PhotonUpdateSystem::nextAffected(const RayScene& scene, const PhotonStore& store,

@@ -114,7 +114,8 @@ public:
         std::size_t movedMobiles = 0;
         std::size_t editedSurfaces = 0; ///< whose albedo changed: their paths re-traced
         std::size_t repaintedPaths = 0; ///< of the re-traced, those first affected by an edit
-        std::size_t candidatePaths = 0; ///< from the grid, before the exact test
+        std::size_t candidatePaths = 0; ///< from the grid or near paths, before the exact test
+        std::size_t nearPathsMade = 0;  ///< moved mobiles whose near paths were made anew
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved or an albedo changed
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
         std::size_t retestedSegments = 0; ///< segments tested again: did they land?
@@ -254,6 +255,12 @@ private:
     void scheduleReshoots();
     void findAffectedPaths(const RayScene& scene, const PhotonStore& store,
                            const PhotonPathGrid& grid);
+    /// mCandidates from the moved mobiles' near paths (made anew from the grid where a mobile
+    /// left its box).
+    void candidatesNearMobiles(const PhotonStore& store, const PhotonPathGrid& grid);
+    /// After the frame's re-trace: each mobile's near paths take the re-traced paths whose new
+    /// segments meet their box; those of mobiles still for kNearIdleFrames are dropped.
+    void updateNearPaths(const PhotonDelta& delta);
     /// The first segment k >= from of path p that hit a moved mobile at its old pose or
     /// crosses one at its new pose; -1 when there is none.
     std::int32_t nextAffected(const RayScene& scene, const PhotonStore& store, std::uint32_t p,
@@ -308,6 +315,21 @@ private:
     std::vector<std::size_t> mFree;      ///< emitters holding free ranges (mergeFreeRanges)
     std::vector<std::pair<std::size_t, std::uint32_t>> mDrifted; ///< light and its share
     std::vector<MovedMobile> mMoved;
+    /// A moving mobile's near paths: every path with a segment that met `box` when they were
+    /// made from the grid, and every path re-traced since whose new segments meet it, in
+    /// increasing order. A superset of the paths that meet the box now: while the mobile's old
+    /// and new boxes stay inside it, its candidates need no grid query, and fewer of them are
+    /// read than the grid's cells hand out (PhotonSettings::nearPathMargin).
+    struct NearPaths {
+        Aabb box;
+        std::vector<std::uint32_t> paths;
+        std::size_t made = 0;   ///< paths held when made from the grid
+        std::uint32_t idle = 0; ///< frames since its mobile last moved
+        bool worth = true;      ///< false: its mobile queries the grid (kNearPathsPerGridPath)
+    };
+    std::unordered_map<Entity, NearPaths> mNearPaths;
+    std::vector<std::uint32_t> mNearScratch, mNearAdded;
+    std::vector<std::uint8_t> mNearMeets;
     /// A surface whose albedo was edited this frame, and its world bounds, slightly widened.
     struct AlbedoEdit {
         Entity entity;

@@ -313,6 +313,19 @@ TEST(PhotonUpdate, RetracingFromAnyStoredSegmentReproducesTheRestOfThePath) {
 // ---- the quasi-static update
 // ---------------------------------------------------------------------
 
+/// The room shot from scratch with its mobiles at these poses gives `registry`'s ray set.
+void expectAFreshShotsStore(const Registry& registry, const PhotonSettings& settings,
+                            const glm::mat4& cubePose, const glm::mat4& cratePose) {
+    Registry fresh;
+    const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
+    fresh.patch<WorldTransform>(again.cube).matrix = cubePose;
+    fresh.patch<WorldTransform>(again.crate).matrix = cratePose;
+    buildRayScene(fresh);
+    PhotonUpdateSystem full(settings);
+    firstUpdate(fresh, full);
+    EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+}
+
 TEST(PhotonUpdate, RandomMovesRetraceExactlyTheAffectedPathsAndMatchAFullReshoot) {
     Registry registry;
     const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
@@ -349,15 +362,7 @@ TEST(PhotonUpdate, RandomMovesRetraceExactlyTheAffectedPathsAndMatchAFullReshoot
     EXPECT_GT(regions, 0u); // store regions compacted on the way (PhotonStoreSpace)
     expectHitsReproduce(storeOf(registry), scene);
 
-    // The same scene shot from scratch with the mobiles where they ended: the same ray set.
-    Registry fresh;
-    const test::Room again = buildRoom(fresh, kCubeRest, kCrateRest);
-    fresh.patch<WorldTransform>(again.cube).matrix = cubePose;
-    fresh.patch<WorldTransform>(again.crate).matrix = cratePose;
-    buildRayScene(fresh);
-    PhotonUpdateSystem full(settings);
-    firstUpdate(fresh, full);
-    EXPECT_TRUE(sameStore(storeOf(registry), storeOf(fresh)));
+    expectAFreshShotsStore(registry, settings, cubePose, cratePose);
 }
 
 TEST(PhotonUpdate, MobilesTakenOutAndPutBackRetraceExactlyTheirPathsAndMatchAFullShot) {
@@ -974,6 +979,49 @@ bool landsAgain(const PhotonStore& before, const RayScene& scene, std::size_t s,
     return again && again->entity == mobile &&
            std::abs(again->t - before.segments.length[s]) <= tolerance &&
            glm::length(normal(again->primitive) - normal(before.segments.hitPrimitive[s])) < 1e-5f;
+}
+
+TEST(PhotonUpdate, SmallMovesFindTheAffectedPathsAmongTheNearPathsExactly) {
+    // Both mobiles drift a centimetre or two a frame, jumping now and then: their candidates
+    // come from the paths kept near them (PhotonSettings::nearPathMargin), updated from each
+    // frame's re-traced paths, and must still give exactly the brute-force affected set.
+    // Coarse grid cells, so that near paths are worth keeping (kNearPathsPerGridPath).
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    const RayScene& scene = buildRayScene(registry);
+    PhotonSettings settings = settingsWith(20'000);
+    settings.gridResolution = 6;
+    settings.reuseLandedPaths = false; // the brute force below is the seed's rule
+    ASSERT_GT(settings.nearPathMargin, 0.f);
+    PhotonUpdateSystem system(settings);
+    firstUpdate(registry, system);
+
+    std::mt19937 rng(77);
+    std::uniform_real_distribution<float> step(-0.02f, 0.02f);
+    glm::vec3 cube = kCubeRest, crate = kCrateRest;
+    std::size_t fromNearPaths = 0, made = 0, retraced = 0;
+    for (std::uint64_t frame = 1; frame <= 30; ++frame) {
+        std::vector<std::pair<Entity, glm::mat4>> moves;
+        for (auto [e, at] : {std::pair{room.cube, &cube}, std::pair{room.crate, &crate}}) {
+            if (frame % 4 == 0 && e == room.crate) continue; // the crate rests now and then
+            *at += frame % 10 == 0 ? glm::vec3(0.4f, 0.f, 0.f) * (at == &cube ? 1.f : -1.f)
+                                   : glm::vec3(step(rng), 0.f, step(rng));
+            moves.emplace_back(e, translation(*at));
+        }
+        const PhotonStore before = storeOf(registry);
+        moveAll(registry, system, moves, frame);
+        expectExactDelta(before, storeOf(registry), deltaOf(registry),
+                         bruteForceFirstAffected(before, scene, moves));
+        if (HasFatalFailure()) return;
+        made += system.lastFrame().nearPathsMade;
+        fromNearPaths += system.lastFrame().nearPathsMade == 0 ? 1 : 0;
+        retraced += deltaOf(registry).paths.size();
+    }
+    EXPECT_GT(fromNearPaths, 15u); // most frames made no near paths anew
+    EXPECT_GE(made, 6u);           // after the jumps at least
+    EXPECT_GT(retraced, 1'000u);
+
+    expectAFreshShotsStore(registry, settings, translation(cube), translation(crate));
 }
 
 TEST(PhotonUpdate, ASlidingMobileKeepsThePathsThatLandWhereTheyDid) {
