@@ -299,7 +299,7 @@ void DetpIrradianceSystem::clearReceiver(std::uint32_t receiver) {
 }
 
 void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const PhotonStore& store,
-                                           std::span<const std::uint32_t> requested) {
+                                           std::span<const std::uint32_t> requested, bool full) {
     mEstimated.clear();
     for (const std::uint32_t r : requested) {
         clearReceiver(r); // an inactive mobile stays so
@@ -314,7 +314,8 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
     for (const std::uint32_t r : mEstimated) {
         const Aabb reach = discBounds(r);
         if (mNear[r].covers(reach)) continue;
-        const bool copy = mCopyWorthIt[r] && mSettings.nearSegmentMargin > 0.f;
+        // A full estimate makes no copies: the ray set changes whole at every one.
+        const bool copy = !full && mCopyWorthIt[r] && mSettings.nearSegmentMargin > 0.f;
         mWalked.push_back(r);
         mWalkCopies.push_back(copy);
         mMobileBoxes.push_back(copy ? nearBox(r, reach) : reach);
@@ -557,7 +558,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
         mAllMobiles.clear();
         for (std::uint32_t r = 0; r < receivers.size(); ++r)
             if (receivers[r].mobile) mAllMobiles.push_back(r);
-        estimateMobiles(registry, store, mAllMobiles);
+        estimateMobiles(registry, store, mAllMobiles, true);
         publishAll(registry);
         return;
     }
@@ -605,7 +606,7 @@ void DetpIrradianceSystem::updateDetp(Registry& registry, const PhotonStore& sto
     timer.emplace(profiler, "mobiles", mStats.mobileMs);
 
     updateNear(delta);
-    estimateMobiles(registry, store, mMoved);
+    estimateMobiles(registry, store, mMoved, false);
     for (const std::uint32_t r : mMoved) {
         mReceivers.publishReceiver(registry, mIrradiance, r);
         mStats.verticesWritten += receivers[r].vertexCount;

@@ -173,9 +173,9 @@ private:
     /// copies of mobiles that moved out of them or have been still for kNearIdleFrames.
     void updateNear(const PhotonDelta& delta);
     /// Re-estimates the listed mobile receivers in full against the current ray set; inactive
-    /// ones are zeroed.
+    /// ones are zeroed. `full`: part of a full estimate (no copies made).
     void estimateMobiles(const Registry& registry, const PhotonStore& store,
-                         std::span<const std::uint32_t> requested);
+                         std::span<const std::uint32_t> requested, bool full);
     void updateImpacts(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,
                        bool full);
     void updatePhotonMap(Registry& registry, const PhotonStore& store, const PhotonDelta& delta,

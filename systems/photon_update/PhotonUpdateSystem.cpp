@@ -915,14 +915,14 @@ void PhotonUpdateSystem::candidatesNearMobiles(const PhotonStore& store,
         if (need.empty()) continue; // out of the world before and after
         NearPaths& near = mNearPaths[m.entity];
         near.idle = 0;
-        if (!near.worth) {
+        if (!near.worth && --near.retryIn > 0) {
             for (const Aabb& box : {m.oldBox, m.newBox})
                 if (!box.empty()) mQueryBoxes.push_back(box);
             continue;
         }
         // Made anew when the mobile left its box, or when re-traced paths that no longer come
         // near it have grown it by half.
-        if (!near.box.empty() && contains(near.box, need) &&
+        if (near.worth && !near.box.empty() && contains(near.box, need) &&
             2 * near.paths.size() <= 3 * near.made + kTestGrain) {
             mCandidates.insert(mCandidates.end(), near.paths.begin(), near.paths.end());
             continue;
@@ -948,7 +948,10 @@ void PhotonUpdateSystem::candidatesNearMobiles(const PhotonStore& store,
         // (a mobile small against the cells); a big mobile's near paths churn as fast as it
         // re-traces them, and would cost more to keep up than the grid's query.
         near.worth = double(near.made) <= kNearPathsPerGridPath * double(mNearScratch.size());
-        if (!near.worth) near.paths = {};
+        if (!near.worth) { // the grid for a while; then another look, since the mobile moves
+            near.paths = {};
+            near.retryIn = kNearIdleFrames;
+        }
     }
     if (!mQueryBoxes.empty()) {
         grid.pathsOverlapping(mQueryBoxes, mNearScratch);

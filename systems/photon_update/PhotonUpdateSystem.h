@@ -326,6 +326,7 @@ private:
         std::size_t made = 0;   ///< paths held when made from the grid
         std::uint32_t idle = 0; ///< frames since its mobile last moved
         bool worth = true;      ///< false: its mobile queries the grid (kNearPathsPerGridPath)
+        std::uint32_t retryIn = 0; ///< while not worth: moves until near paths are tried again
     };
     std::unordered_map<Entity, NearPaths> mNearPaths;
     std::vector<std::uint32_t> mNearScratch, mNearAdded;
