@@ -37,6 +37,8 @@ constexpr std::size_t kTestGrain = 256;       // candidate paths per task
 /// A moving mobile keeps its near paths while they are at most this share of the paths the
 /// grid hands out for the same box (PhotonSettings::nearPathMargin).
 constexpr double kNearPathsPerGridPath = 0.5;
+/// A mobile whose near paths were not worth keeping tries them again after this many moves.
+constexpr std::uint32_t kNearRetryMoves = 64;
 constexpr std::size_t kCopyGrain = 512;       // paths per task when moving segments
 // A shot where more of the lit photons than this leave the scene at once is warned about.
 constexpr double kMostlyEscaped = 0.99;
@@ -950,7 +952,7 @@ void PhotonUpdateSystem::candidatesNearMobiles(const PhotonStore& store,
         near.worth = double(near.made) <= kNearPathsPerGridPath * double(mNearScratch.size());
         if (!near.worth) { // the grid for a while; then another look, since the mobile moves
             near.paths = {};
-            near.retryIn = kNearIdleFrames;
+            near.retryIn = kNearRetryMoves;
         }
     }
     if (!mQueryBoxes.empty()) {
