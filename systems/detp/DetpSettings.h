@@ -45,14 +45,15 @@ struct DetpSettings {
     /// A moved mobile keeps a copy of the stored segments near it (NearSegments) over a box
     /// this share of its size wider on every side than its discs' reach, or more when it moves
     /// fast (neighbourhoodBox), so that the moves that follow
-    /// read the copy instead of querying the path grid and walking the store. 0: no copy is kept,
-    /// every move walks the store. At most 1.
+    /// read the copy instead of querying the path grid and walking the store; kept while that
+    /// costs less than the walk (kNearCopiesPerWalkedPath). 0: no copy is kept, every move
+    /// walks the store. At most 1.
     float nearSegmentMargin = 0.125f;
 };
 
 /// A mobile keeps a copy of the segments near it while it holds at most this many segments per
 /// path its last walk read: each costs about as much a frame to keep up (apply, select) as a
-/// candidate path costs to walk (BENCHMARKS.md, "Copies of the segments near a mobile").
+/// candidate path costs to walk (ARCHITECTURE.md, "Copies of the segments near a mobile").
 inline constexpr double kNearCopiesPerWalkedPath = 1.0;
 
 /// Default search cap of the photon map, in disc radii: wide enough that k = 50 hit points are
