@@ -1526,6 +1526,11 @@ TEST(Detp, RejectsBadSettings) {
     s = {};
     s.maxIncrementalUpdates = 0;
     EXPECT_THAT(message(s), HasSubstr("DetpSettings.maxIncrementalUpdates"));
+    for (const float margin : {-0.1f, 1.5f, std::nanf("")}) {
+        s = {};
+        s.nearSegmentMargin = margin;
+        EXPECT_THAT(message(s), HasSubstr("DetpSettings.nearSegmentMargin"));
+    }
     EXPECT_THROW(parseIrradianceEstimator("kernel"), Error);
     EXPECT_EQ(parseIrradianceEstimator("photonmap"), IrradianceEstimator::PhotonMap);
 }

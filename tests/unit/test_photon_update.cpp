@@ -2455,6 +2455,9 @@ TEST(PhotonUpdate, AbsurdSettingsAreRejectedNamingTheField) {
     rejects([](PhotonSettings& s) { s.gridResolution = 4096; }, "gridResolution");
     rejects([](PhotonSettings& s) { s.compactionFraction = 0.f; }, "compactionFraction");
     rejects([](PhotonSettings& s) { s.compactionFraction = NAN; }, "compactionFraction");
+    rejects([](PhotonSettings& s) { s.nearPathMargin = -0.5f; }, "nearPathMargin");
+    rejects([](PhotonSettings& s) { s.nearPathMargin = NAN; }, "nearPathMargin");
+    rejects([](PhotonSettings& s) { s.nearPathMargin = 2.f; }, "nearPathMargin");
     rejects([](PhotonSettings& s) { s.gridRefreshBudget = 0; }, "gridRefreshBudget");
     rejects(
         [](PhotonSettings& s) {
