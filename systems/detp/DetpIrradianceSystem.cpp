@@ -425,15 +425,20 @@ void DetpIrradianceSystem::walkNear(const Registry& registry, const PhotonStore&
         for (std::size_t c = 0; c < chunks; ++c)
             picked += mChunkLists[c * count + j].size();
         // Whether a copy is worth its upkeep, for the walks to come: it costs about as much a
-        // frame per segment held as a walk does per candidate path (BENCHMARKS.md). A mobile
+        // frame per segment held as a walk does per candidate path (ARCHITECTURE.md). A mobile
         // that walked without one estimates what one would hold from the surface areas of the
-        // two boxes.
+        // two boxes. Its own candidates: where several mobiles walked together, its box's alone.
         double held = double(picked);
         if (!mWalkCopies[j]) {
             const Aabb reach = mMobileBoxes[j];
             held *= surfaceArea(nearBox(r, reach)) / surfaceArea(reach);
         }
-        mCopyWorthIt[r] = held <= kNearCopiesPerWalkedPath * double(candidates.size());
+        std::size_t own = candidates.size();
+        if (count > 1 && candidates.data() == mCandidatePaths.data()) {
+            grid->pathsOverlapping(mMobileBoxes[j], mOwnCandidates);
+            own = mOwnCandidates.size();
+        }
+        mCopyWorthIt[r] = held <= kNearCopiesPerWalkedPath * double(own);
         if (mWalkCopies[j]) {
             mPicks.clear();
             for (std::size_t c = 0; c < chunks; ++c)
@@ -455,9 +460,10 @@ void DetpIrradianceSystem::updateNear(const PhotonDelta& delta) {
     for (std::uint32_t r = 0; r < mNear.size(); ++r) {
         NearSegments& near = mNear[r];
         if (!near.valid()) continue;
-        // Still too long, or moved out of it: dropped (a new one is made at its next move).
+        // Still too long, moved out of it, or grown: dropped (a new one is made at its next
+        // move).
         if ((!mIsMoved[r] && mNearIdle[r] >= kNearIdleFrames) ||
-            (mIsMoved[r] && !near.covers(discBounds(r)))) {
+            (mIsMoved[r] && !near.covers(discBounds(r))) || near.outgrown()) {
             near.clear();
             continue;
         }

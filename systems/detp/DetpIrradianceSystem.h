@@ -242,6 +242,7 @@ private:
     std::vector<std::vector<std::uint32_t>> mDirect;
     std::vector<std::vector<NearSegments::Pick>> mChunkLists; ///< walkNear: per task and mobile
     std::vector<NearSegments::Pick> mPicks;
+    std::vector<std::uint32_t> mOwnCandidates;           ///< walkNear: one mobile's, for its worth
     std::vector<std::uint32_t> mAllMobiles;              ///< receiver indices, full estimates
     std::vector<DiscCrossing> mCrossings;
     std::vector<std::uint32_t> mTouched;

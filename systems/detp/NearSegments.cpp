@@ -69,6 +69,7 @@ void NearSegments::copyRange(std::size_t to, const NearSegments& from, std::size
 void NearSegments::build(const PhotonStore& store, const Aabb& box, float tail, Entity mobile,
                          std::span<const Pick> picks) {
     mValid = true;
+    mMade = picks.size();
     mBox = box;
     mTail = tail;
     mMobile = mobile;

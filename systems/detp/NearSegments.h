@@ -42,6 +42,13 @@ struct DeltaByPath {
  *
  *  The copies are kept in (path, k) order, the order in which a walk over the paths in
  *  increasing order meets them, so a mobile's sums come out the same bit for bit either way.
+ *  What the copy holds is what the walk that made it found (the path grid's candidates, whose
+ *  cells a segment's own extent decides) and what deltas brought since: a segment that meets
+ *  the box only through its tail, past its end, may be missing. None such crosses a disc, since
+ *  the reach box holds the end of every segment that crosses one (DetpIrradianceSystem::
+ *  discBounds), so the sums do not change. A path's light is copied too: it can change without
+ *  a delta only where a light's photons are handed to a ghost, which keeps its directDrawn, or
+ *  where empty ranges (no segments, nothing copied) are handed on.
  *  52 bytes per copy: a 44-byte record (origin, direction, power, length, k, a flag, light)
  *  and its key (path and k), which apply() scans alone. Not thread safe. */
 class NearSegments {
@@ -57,6 +64,9 @@ public:
     /// Whether the copy holds every stored segment that meets `box` with the copy's tail.
     bool covers(const Aabb& box) const;
     std::size_t size() const { return mKey.size(); }
+    /// Whether deltas have doubled it since it was made (paths re-traced into its box while
+    /// those that left stay out: a grown copy is made anew, and its worth judged again).
+    bool outgrown() const { return size() > 2 * mMade + 4096; }
     std::size_t memoryBytes() const;
     /// Drops the copy and frees its memory.
     void clear();
@@ -128,6 +138,7 @@ private:
     void copyRange(std::size_t to, const NearSegments& from, std::size_t first, std::size_t count);
 
     bool mValid = false;
+    std::size_t mMade = 0; ///< copies at build()
     Aabb mBox;
     float mTail = 0.f;
     Entity mMobile;

@@ -945,6 +945,7 @@ void PhotonUpdateSystem::candidatesNearMobiles(const PhotonStore& store,
             if (mNearMeets[i]) near.paths.push_back(mNearScratch[i]);
         near.made = near.paths.size();
         ++mStats.nearPathsMade;
+        mStats.nearPathsWalked += mNearScratch.size();
         mCandidates.insert(mCandidates.end(), near.paths.begin(), near.paths.end());
         // Worth keeping only where the grid's cells hand out many paths that do not come near
         // (a mobile small against the cells); a big mobile's near paths churn as fast as it

@@ -116,6 +116,7 @@ public:
         std::size_t repaintedPaths = 0; ///< of the re-traced, those first affected by an edit
         std::size_t candidatePaths = 0; ///< from the grid or near paths, before the exact test
         std::size_t nearPathsMade = 0;  ///< moved mobiles whose near paths were made anew
+        std::size_t nearPathsWalked = 0; ///< grid candidates walked to make them
         std::size_t retracedPaths = 0;  ///< re-traced because a mobile moved or an albedo changed
         std::size_t landedPaths = 0;    ///< kept: every affected segment landed where it did
         std::size_t retestedSegments = 0; ///< segments tested again: did they land?

@@ -520,7 +520,7 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w, int turn = 5) {
     double retraced = 0, landed = 0, retested = 0, candidates = 0, segments = 0, find = 0,
            trace = 0, grid = 0, detp = 0, detpDelta = 0, detpMobile = 0, mobilePaths = 0,
            mobileSegments = 0, crossings = 0, deltaSegments = 0, nearSegments = 0,
-           mobilesWalked = 0;
+           mobilesWalked = 0, nearPathsWalked = 0;
     for (auto _ : state) {
         detp += w.step(false, turn);
         const PhotonUpdateSystem::FrameStats& stats = w.system->lastFrame();
@@ -528,6 +528,7 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w, int turn = 5) {
         landed += double(stats.landedPaths);
         retested += double(stats.retestedSegments);
         candidates += double(stats.candidatePaths);
+        nearPathsWalked += double(stats.nearPathsWalked);
         segments += double(stats.tracedSegments);
         find += stats.findMs;
         trace += stats.traceMs;
@@ -554,6 +555,7 @@ void moveMobiles(benchmark::State& state, PhotonWorld& w, int turn = 5) {
     state.counters["detp_mobile_paths"] = mobilePaths / frames;
     state.counters["detp_mobile_segments"] = mobileSegments / frames;
     state.counters["detp_near_segments"] = nearSegments / frames;
+    state.counters["near_paths_walked/frame"] = nearPathsWalked / frames;
     state.counters["detp_mobiles_walked"] = mobilesWalked / frames;
     state.counters["detp_crossings"] = crossings / frames;
     state.counters["detp_delta_segments"] = deltaSegments / frames;
