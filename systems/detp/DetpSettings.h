@@ -52,9 +52,9 @@ struct DetpSettings {
 };
 
 /// A mobile keeps a copy of the segments near it while it holds at most this many segments per
-/// path its last walk read: each costs about as much a frame to keep up (apply, select) as a
-/// candidate path costs to walk (ARCHITECTURE.md, "Copies of the segments near a mobile").
-inline constexpr double kNearCopiesPerWalkedPath = 1.0;
+/// path its last walk read: each costs at most half as much a frame to keep up (apply, select)
+/// as a candidate path costs to walk (ARCHITECTURE.md, "Copies of the segments near a mobile").
+inline constexpr double kNearCopiesPerWalkedPath = 2.0;
 
 /// Default search cap of the photon map, in disc radii: wide enough that k = 50 hit points are
 /// found wherever a DETP disc would count about 3 or more segments.
