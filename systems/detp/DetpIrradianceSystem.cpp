@@ -329,6 +329,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
     for (const std::uint32_t r : mEstimated) {
         const bool walked = j < mWalked.size() && mWalked[j] == r;
         const bool direct = walked && !mWalkCopies[j];
+        const Aabb reach = discBounds(r);
         const auto& receiver = mReceivers.receivers()[r];
         NearSegments& near = mNear[r];
         if (direct) {
@@ -337,7 +338,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
                             store.segments.power.data(), mDirect[j], {}, 1.0, false);
         } else {
             near.select(
-                discBounds(r), !leavingSkippedFrom(r).isNull(),
+                reach, !leavingSkippedFrom(r).isNull(),
                 [&](std::uint16_t light) { return countsFirst(light); }, mSegmentList);
             mStats.nearSegments += near.size();
             mStats.candidateSegments += mSegmentList.size();
@@ -349,7 +350,7 @@ void DetpIrradianceSystem::estimateMobiles(const Registry& registry, const Photo
         const std::uint32_t end = receiver.firstVertex + receiver.vertexCount;
         for (std::uint32_t v = receiver.firstVertex; v < end; ++v)
             mIrradiance[v] = published(mPowerSum[v].value() * toIrradiance);
-        mLastReach[r] = discBounds(r);
+        mLastReach[r] = reach;
         mNearIdle[r] = 0;
     }
 }

@@ -43,11 +43,6 @@ bool NearSegments::covers(const Aabb& box) const {
     return mValid && contains(mBox, box);
 }
 
-std::size_t NearSegments::memoryBytes() const {
-    const auto bytes = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
-    return bytes(mKey) + bytes(mCopies) + bytes(mCuts) + bytes(mIncoming) + bytes(mSelected);
-}
-
 void NearSegments::clear() {
     *this = NearSegments{};
 }

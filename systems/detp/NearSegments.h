@@ -60,14 +60,12 @@ public:
     };
 
     bool valid() const { return mValid; }
-    const Aabb& box() const { return mBox; }
     /// Whether the copy holds every stored segment that meets `box` with the copy's tail.
     bool covers(const Aabb& box) const;
     std::size_t size() const { return mKey.size(); }
     /// Whether deltas have doubled it since it was made (paths re-traced into its box while
     /// those that left stay out: a grown copy is made anew, and its worth judged again).
     bool outgrown() const { return size() > 2 * mMade + 4096; }
-    std::size_t memoryBytes() const;
     /// Drops the copy and frees its memory.
     void clear();
 
