@@ -14,6 +14,11 @@
 //    turn back instead of 5 cm.
 //  - MobileUpdatePhotons/cornell/<photons> and FullReshootPhotons/cornell/<photons>: the same
 //    pair at 125k, 250k and 500k photons: the photon count that fits a frame budget.
+//  - MobileUpdatePhotons/two-rooms/<photons> and FullReshootPhotons/two-rooms/<photons>: the
+//    same pair on two closed rooms, a mobile cube moving in one of them, whose light keeps
+//    250k photons while the other room's light takes the rest of 0.5M to 4M: the ray set
+//    grows eightfold, the paths the cube can touch stay the same. The incremental frame
+//    should stay flat while the full recompute grows with the ray set.
 //  - MobileToggle/<scene>: the same frame when the mobiles are taken out of the world and put
 //    back on alternate frames (MobileMesh::active), the pooled objects' spawn and despawn.
 //  - FullShot/<scene>: a frame that shoots every photon, path grid and full estimate included
@@ -43,7 +48,9 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/BuiltinScenes.h"
+#include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
+#include "runtime/scene/SceneQueries.h"
 #include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -71,8 +78,73 @@ namespace {
 constexpr std::size_t kGrain = 1024; // rays per task, as in bench_raytrace
 constexpr std::uint32_t kSeed = 1234;
 
+/// Two closed rooms side by side, each with a point light; a mobile cube in the first
+/// (buildTwoRooms).
+const std::string kTwoRooms = "two-rooms";
+/// Photons of the first room's light, whatever the photon count.
+constexpr std::uint32_t kFirstRoomPhotons = 250'000;
+
 std::uint32_t photonsFor(const std::string& scene) {
-    return scene == "cornell" ? 1'000'000 : 4'000'000;
+    return scene == "atrium" ? 4'000'000 : 1'000'000;
+}
+
+/// An axis-aligned box of half extents `half` centred on `centre`, facing out (or in: a room),
+/// refined for per-vertex lighting to 10 cm edges.
+Mesh refinedBox(const glm::vec3& centre, const glm::vec3& half, bool inward) {
+    Mesh raw;
+    for (int i = 0; i < 8; ++i)
+        raw.positions.push_back(centre + glm::vec3(i & 1 ? half.x : -half.x,
+                                                   i & 2 ? half.y : -half.y,
+                                                   i & 4 ? half.z : -half.z));
+    // Each face's corners counter-clockwise seen from outside.
+    const std::uint32_t faces[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4},
+                                       {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
+    for (const auto& f : faces) {
+        const std::uint32_t a = f[0], b = inward ? f[3] : f[1], c = f[2], d = inward ? f[1] : f[3];
+        raw.indices.insert(raw.indices.end(), {a, b, c, a, c, d});
+    }
+    MeshProcessingOptions options;
+    options.maxEdgeLength = 0.1f;
+    return processMesh(raw, options);
+}
+
+/// kTwoRooms with `photons` in all: two closed 3 x 2.4 x 3 m rooms 1.5 m apart (albedo 0.6),
+/// each lit by a point light under its ceiling and holding a 30 cm cube 2 cm above the floor,
+/// the first room's mobile, the second's static. The first room's light gets
+/// kFirstRoomPhotons (photons go to the lights in proportion to their power), the second's
+/// the rest. No path leaves its room, so the paths the moving cube can touch are the same at
+/// any photon count.
+void buildTwoRooms(Registry& registry, std::uint32_t photons) {
+    Material wall;
+    wall.baseColor = glm::vec3(0.6f);
+    const auto add = [&](const char* name, Mesh mesh, bool mobile) {
+        const Entity e = registry.create();
+        registry.emplace<Name>(e, name);
+        registry.emplace<Mesh>(e, std::move(mesh));
+        registry.emplace<WorldTransform>(e, glm::mat4(1.f));
+        registry.emplace<Material>(e, wall);
+        if (mobile)
+            registry.emplace<MobileMesh>(e);
+        else
+            registry.emplace<StaticMesh>(e);
+    };
+    const glm::vec3 room(1.5f, 1.2f, 1.5f), cube(0.15f);
+    const float firstIntensity = 10.f;
+    for (int r = 0; r < 2; ++r) {
+        const glm::vec3 centre(4.5f * float(r), room.y, 0.f);
+        add(r == 0 ? "first room" : "second room", refinedBox(centre, room, true), false);
+        add(r == 0 ? "cube" : "static cube",
+            refinedBox(centre + glm::vec3(0.4f, cube.y + 0.02f - room.y, 0.3f), cube, false),
+            r == 0);
+        const Entity light = registry.create();
+        registry.emplace<WorldTransform>(
+            light, glm::translate(glm::mat4(1.f), centre + glm::vec3(0.f, 0.8f * room.y, 0.f)));
+        const float share = r == 0 ? 1.f
+                                   : float(photons - std::min(photons, kFirstRoomPhotons)) /
+                                         float(kFirstRoomPhotons);
+        registry.emplace<PointLight>(light, PointLight{glm::vec3(1.f), share * firstIntensity});
+    }
+    registry.ctx().emplace<SceneInfo>(describeMeshes(registry));
 }
 
 /// A built-in scene with its ray scene and photon system, shot once per process.
@@ -90,10 +162,15 @@ struct PhotonWorld {
     /// photons 0: photonsFor(name); gridResolution 0: the default PhotonSettings::gridResolution.
     PhotonWorld(const std::string& name, bool fullRecompute, std::uint32_t gridResolution,
                 std::uint32_t photons) {
-        buildBuiltinScene(registry, name, SceneOptions{});
+        if (photons == 0) photons = photonsFor(name);
+        const bool rooms = name == kTwoRooms;
+        if (rooms)
+            buildTwoRooms(registry, photons);
+        else
+            buildBuiltinScene(registry, name, SceneOptions{});
         registry.ctx().emplace<RayScene>().build(registry);
         PhotonSettings settings;
-        settings.photonCount = photons > 0 ? photons : photonsFor(name);
+        settings.photonCount = photons;
         settings.fullRecompute = fullRecompute;
         if (gridResolution > 0) settings.gridResolution = gridResolution;
         // Photon mode on the cornell box: its luminaire, not the punctual stand-in.
@@ -101,7 +178,10 @@ struct PhotonWorld {
         system = std::make_unique<PhotonUpdateSystem>(settings);
         system->update(registry, FrameContext{});
         DetpSettings detp;
-        detp.hybrid = settings.punctualLights;
+        // Photon mode on the two rooms too, with a disc radius that does not shrink as the
+        // second room's photons grow (the default follows the photon count).
+        detp.hybrid = settings.punctualLights && !rooms;
+        if (rooms) detp.discRadius = 0.05f;
         irradiance = std::make_unique<DetpIrradianceSystem>(detp);
         irradiance->build(registry);
         irradiance->update(registry, FrameContext{});
@@ -654,6 +734,18 @@ int main(int argc, char** argv) {
                 ->Unit(benchmark::kMillisecond);
         }
     }
+    // The ray set grows eightfold, the paths the moving cube can touch stay (buildTwoRooms).
+    for (const bool full : {false, true})
+        RegisterBenchmark(
+            (std::string(full ? "FullReshootPhotons/" : "MobileUpdatePhotons/") + kTwoRooms)
+                .c_str(),
+            BM_PhotonBudget, kTwoRooms, full)
+            ->Arg(500'000)
+            ->Arg(1'000'000)
+            ->Arg(2'000'000)
+            ->Arg(4'000'000)
+            ->UseRealTime()
+            ->Unit(benchmark::kMillisecond);
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
     benchmark::RunSpecifiedBenchmarks();
