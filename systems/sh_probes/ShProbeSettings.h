@@ -28,13 +28,15 @@ struct ShProbeSettings {
     std::uint32_t updateBudget = 16;
     /// Probes a sweep visits a frame, in index order and round again, re-projecting each one
     /// the budget did not choose, whether or not anything marked it: every probe is projected
-    /// afresh at least once every ceil(probeCount / sweepPerFrame) frames. What the marking
+    /// afresh within ceil(probeCount / sweepPerFrame) frames of any change. What the marking
     /// rules below let through (a ray that meets a mobile far away, a surface lit anew beyond
     /// influenceDistance) is put right within that time, and so is a stale probe far from the
-    /// avatars that the budget, busy nearer them, keeps passing over. A probe's rays are fixed
-    /// by (seed, probe), so re-projecting one whose view did not change gives it the same
-    /// coefficients bit for bit. 0: marked probes only, chosen by the budget. At 4 on the atrium
-    /// (1,536 probes, 256 rays): a round in 384 frames (costs in docs/BENCHMARKS.md).
+    /// avatars that the budget, busy nearer them, keeps passing over. The sweep runs while the
+    /// scene changes and for one round after its last change, then rests (an unchanged scene
+    /// costs the avatar lookups only). A probe's rays are fixed by (seed, probe), so
+    /// re-projecting one whose view did not change gives it the same coefficients bit for bit.
+    /// 0: marked probes only, chosen by the budget. At 4 on the atrium (1,536 probes, 256
+    /// rays): a round in 384 frames (costs in docs/BENCHMARKS.md).
     std::uint32_t sweepPerFrame = 4;
     /// Probes within this distance of a change (a delta segment's end point, the old or new
     /// bounds of a moved mobile) are marked stale, metres. 0: twice the spacing.

@@ -123,6 +123,7 @@ void ShProbeSystem::build(Registry& registry) {
     mStale.assign(mVolume->probeCount(), 0);
     mStaleCount = 0;
     mSweepCursor = 0;
+    mSweepOwed = 0; // the first projection sees the scene as it is
     mLightSet = lightSetSignature(registry);
     mCellQueued.assign(mVolume->grid().cellCount(), 0);
     mFineTouched.clear(); // end points counted from the next delta on
@@ -448,7 +449,7 @@ void ShProbeSystem::markShadowed(const Aabb& box) {
     }
 }
 
-void ShProbeSystem::markChanges(const Registry& registry) {
+bool ShProbeSystem::markChanges(const Registry& registry) {
     bool all = false;
     // Lights: any change of a punctual light (its component, or its pose) reaches everywhere.
     if (!registry.changed<PointLight>().empty() || !registry.changed<SpotLight>().empty() ||
@@ -479,8 +480,9 @@ void ShProbeSystem::markChanges(const Registry& registry) {
                 mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
             mobile.active = !outOfWorld(registry, entity);
         }
-        return;
+        return true;
     }
+    bool changed = false;
 
     // Moved mobiles, and mobiles taken out or put back (MobileMesh::active): their old and new
     // bounds.
@@ -504,6 +506,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
             mobile.worldBounds = now;
             return;
         }
+        changed = true;
         // Reach: the influence distance, or as far as the mobile still covers the given
         // share of a probe's sphere of directions.
         const glm::vec3 extent = glm::max(now.extent(), mobile.worldBounds.extent());
@@ -541,6 +544,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
             count = std::uint16_t(count / 2);
     }
     if (delta && !delta->paths.empty()) {
+        changed = true; // marked or not: the sweep puts right what the rules let through
         const float fine = 0.5f * grid.spacing;
         const glm::ivec3 fineCounts = 2 * grid.counts + 1;
         const glm::vec3 fineOrigin = grid.origin - 0.5f * fine;
@@ -576,6 +580,7 @@ void ShProbeSystem::markChanges(const Registry& registry) {
                     count = 0;
                 }
     }
+    return changed;
 }
 
 void ShProbeSystem::chooseRefresh(const Registry& registry) {
@@ -641,8 +646,9 @@ void ShProbeSystem::sweep() {
     // for as long as changes near the avatars fill the budget. None is taken twice: two
     // threads would project it at once.
     const auto count = std::uint32_t(mStale.size());
-    const std::uint32_t visits = std::min(mSettings.sweepPerFrame, count);
+    const std::uint32_t visits = std::min({mSettings.sweepPerFrame, count, mSweepOwed});
     if (visits == 0) return;
+    mSweepOwed -= visits;
     if (mSweepCursor >= count) mSweepCursor = 0; // build() resets it; a smaller volume
     mChosen.assign(mRefresh.begin(), mRefresh.end());
     std::sort(mChosen.begin(), mChosen.end());
@@ -779,7 +785,7 @@ void ShProbeSystem::update(Registry& registry, const FrameContext&) {
                 if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity))
                     mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
         } else {
-            markChanges(registry);
+            if (markChanges(registry)) mSweepOwed = std::uint32_t(mStale.size()); // a round
             mStats.staleBefore = mStaleCount;
             chooseRefresh(registry);
             sweep();

@@ -62,10 +62,11 @@ class RayScene;
  *  and re-project at most updateBudget stale probes a frame, nearest (in cells) to an avatar
  *  first, ties by index; besides them a sweep visits sweepPerFrame probes round robin over the
  *  volume and re-projects each one the budget did not choose, stale or not, so every probe is
- *  projected afresh within ceil(probeCount / sweepPerFrame) frames: whatever the marking rules
- *  let through is put right in that time, and so is a stale probe far from every avatar that
- *  the budget keeps passing over. An unchanged scene re-projects the swept probes only, which
- *  get the same coefficients again.
+ *  projected afresh within ceil(probeCount / sweepPerFrame) frames of any change: whatever the
+ *  marking rules let through is put right in that time, and so is a stale probe far from
+ *  every avatar that the budget keeps passing over. The sweep goes on while the scene changes
+ *  and for one round after its last change, then rests: by then every probe has been
+ *  projected since that change, so an unchanged scene costs the avatar lookups only.
  *
  *  Avatars (every frame): the radiance SH at the avatar's origin (WorldTransform translation)
  *  from ProbeVolume::interpolate: trilinear weights, zero for disabled probes and for probes
@@ -167,10 +168,13 @@ private:
     void computeVisibility(std::uint32_t cell, ProbeVolume& volume) const;
     void markNear(const glm::vec3& point, float radius);
     void markNearBox(const Aabb& box, float radius);
-    void markChanges(const Registry& registry);
+    /// Marks the probes this frame's changes reach; true when the scene changed at all (a
+    /// light, a material, a mobile's pose or presence, a photon delta with paths), whether or
+    /// not the rules marked a probe for it.
+    bool markChanges(const Registry& registry);
     void chooseRefresh(const Registry& registry);
-    /// Visits the next sweepPerFrame probes round robin and appends to mRefresh each one that
-    /// chooseRefresh did not put there.
+    /// Visits the next sweepPerFrame probes round robin, while the sweep still owes visits
+    /// (mSweepOwed), and appends to mRefresh each one that chooseRefresh did not put there.
     void sweep();
 
     ShProbeSettings mSettings;
@@ -186,6 +190,9 @@ private:
     std::vector<std::uint32_t> mChosen; ///< sweep(): the budget's choices, sorted
     std::size_t mStaleCount = 0;
     std::uint32_t mSweepCursor = 0;  ///< next probe the sweep visits
+    /// Visits the sweep still owes: a whole round from each change on, so that it rests once
+    /// it has gone round the volume after the scene's last change.
+    std::uint32_t mSweepOwed = 0;
     PhotonDeltaReader mDeltaReader;
     FrameStats mStats;
 

@@ -5,8 +5,8 @@
 //  - MovingMobile/<budget>: the system's frame while the cart moves along the east gallery
 //    (the photon update and DETP run untimed before it, 100k photons): stale marking from the
 //    photon delta and the moved bounds, a refresh of at most <budget> probes, the 7 avatars;
-//  - UnchangedScene/<sweep>: the system's frame on a still scene with sweepPerFrame <sweep>:
-//    what the sweep costs when nothing changes;
+//  - UnchangedScene/<sweep>: the system's frame on a still scene with sweepPerFrame <sweep>
+//    (the sweep rests once it has gone round after the last change: the avatars only);
 //  - StaleResidual: the irradiance error the stale-marking rules leave in the probes they do
 //    not mark while the cart moves (an unlimited budget refreshes every marked probe);
 //  - AvatarLookups/<count>: ProbeVolume::interpolate for <count> avatars spread over the

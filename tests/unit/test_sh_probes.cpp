@@ -1619,39 +1619,64 @@ TEST(ShProbes, EachPhotonDeltaIsReadOnceAndOneMissedMarksEverything) {
     EXPECT_EQ(fresh.lastFrame().markedStale, 0u);
 }
 
-TEST(ShProbes, TheSweepReprojectsEveryProbeAndChangesNoneOfAnUnchangedScene) {
-    // 7 a frame over the room's probes, in index order and round again past the last (a
-    // little over one round here): the k-th visit is probe k mod count. An unchanged scene
-    // keeps every coefficient bit for bit (a probe's rays are fixed).
+TEST(ShProbes, TheSweepGoesRoundOnceAfterTheLastChangeThenRests) {
+    // 7 a frame over the room's probes. An unchanged scene sweeps nothing. The cube pushed and
+    // put back: from the last change on, the sweep visits 7 probes a frame in index order,
+    // round once from where it stood (a little over one round counted from the first change),
+    // then rests. The cube back where it was, every probe ends with the coefficients it had,
+    // bit for bit (a probe's rays are fixed).
     MobileRoom room(16, 4, 0, 7);
     const std::vector<sh::ShRgb> before = room.probes();
-    const std::size_t count = before.size();
-    std::vector<int> visits(count, 0);
-    const std::size_t frames = count / 7 + 2;
-    for (std::size_t f = 1; f <= frames; ++f) {
+    const auto count = std::uint32_t(before.size());
+    for (std::uint64_t f = 1; f <= 3; ++f) {
         room.frame(f);
-        const ShProbeSystem::FrameStats& stats = room.system.lastFrame();
-        EXPECT_EQ(stats.markedStale, 0u);
-        EXPECT_EQ(stats.swept, 7u);
-        EXPECT_EQ(stats.refreshed, 7u);
-        for (const std::uint32_t p : room.system.lastRefreshed())
-            ++visits[p];
+        EXPECT_EQ(room.system.lastFrame().refreshed, 0u) << "frame " << f;
     }
-    for (std::size_t p = 0; p < count; ++p)
-        EXPECT_EQ(visits[p], p < 7 * frames - count ? 2 : 1) << "probe " << p;
+    room.moveCube({-1.f, 0.3f, 0.f}, 4);
+    EXPECT_GT(room.system.lastFrame().swept, 0u);
+    room.moveCube({-1.5f, 0.3f, 0.f}, 5); // where it stood
+    std::uint32_t cursor = 14;            // two frames of 7 so far
+    std::uint64_t f = 5;
+    std::size_t visited = 7; // the round counts from frame 5's visits on
+    while (visited < count) {
+        room.frame(++f);
+        ASSERT_LT(f, 1000u) << "the sweep does not go round";
+        const ShProbeSystem::FrameStats& stats = room.system.lastFrame();
+        const std::uint32_t visits = std::min<std::uint32_t>(7, count - std::uint32_t(visited));
+        std::set<std::uint32_t> expected;
+        for (std::uint32_t k = 0; k < visits; ++k, cursor = (cursor + 1) % count)
+            expected.insert(cursor);
+        const std::span<const std::uint32_t> refreshed = room.system.lastRefreshed();
+        const std::set<std::uint32_t> got(refreshed.begin(), refreshed.end());
+        for (const std::uint32_t p : expected)
+            EXPECT_TRUE(got.count(p)) << "probe " << p << " not swept in frame " << f;
+        EXPECT_EQ(stats.markedStale, 0u);
+        visited += visits;
+    }
+    for (std::uint64_t rest = 0; rest < 5; ++rest) {
+        room.frame(++f);
+        EXPECT_EQ(room.system.lastFrame().refreshed, 0u) << "frame " << f;
+        EXPECT_EQ(room.system.lastFrame().swept, 0u) << "frame " << f;
+    }
+    EXPECT_EQ(room.system.staleCount(), 0u);
     const std::vector<sh::ShRgb> after = room.probes();
     for (std::size_t p = 0; p < count; ++p)
         EXPECT_TRUE(sameSh(before[p], after[p])) << "probe " << p;
 }
 
 /// Follows the sweep's cursor from outside: it starts at probe 0 when the volume is built and
-/// visits min(sweepPerFrame, count) probes a frame, in index order and round again.
+/// visits min(sweepPerFrame, count) probes a frame, in index order and round again, until it
+/// has gone round once after the last change.
 struct SweepTrack {
     std::uint32_t cursor = 0, perFrame = 0, count = 0;
-    /// The probes the next frame visits.
-    std::set<std::uint32_t> next() {
+    std::uint32_t owed = 0; ///< visits left before the sweep rests
+    /// The probes the next frame visits; `changed`: the scene changed in that frame.
+    std::set<std::uint32_t> next(bool changed = false) {
+        if (changed) owed = count;
         std::set<std::uint32_t> visited;
-        for (std::uint32_t k = 0; k < std::min(perFrame, count); ++k) {
+        const std::uint32_t visits = std::min({perFrame, count, owed});
+        owed -= visits;
+        for (std::uint32_t k = 0; k < visits; ++k) {
             visited.insert(cursor);
             cursor = cursor + 1 == count ? 0 : cursor + 1;
         }
@@ -1670,7 +1695,7 @@ TEST(ShProbes, TheSweepTakesStaleProbesTheBudgetLeavesAndNeverDoublesOne) {
     const auto count = std::uint32_t(room.probes().size());
     SweepTrack track{0, kSweep, count};
     room.moveCube({-1.2f, 0.3f, 0.f}, 1);
-    track.next();
+    track.next(true);
     std::size_t sweptStale = 0;
     std::uint64_t f = 1;
     while (room.system.staleCount() > 0) {
@@ -1745,22 +1770,30 @@ TEST(ShProbes, WithNoBudgetTheSweepAloneRefreshesStaleProbes) {
 
 TEST(ShProbes, TheSweepStartsOverInAVolumeRebuiltSmaller) {
     // The cursor stands at 70 of 576 when the volume is rebuilt over 2 x 1 x 2 m (32 probes).
+    // Each frame brings a photon delta with one end point, a change too small to mark a
+    // probe (minDeltaEndPoints 4; each in a cell of its own), which keeps the sweep going.
     MobileRoom room(16, 4, 0, 7);
-    for (std::uint64_t f = 1; f <= 10; ++f)
+    PhotonDelta& delta = room.world.ctx().emplace<PhotonDelta>();
+    const auto changeFrame = [&](std::uint64_t f) {
+        delta = oneEndPointDelta(-0.9f + 0.2f * float(f % 10), 0.4f * float(f % 3) - 0.4f, f);
         room.frame(f);
+        EXPECT_EQ(room.system.lastFrame().markedStale, 0u) << "frame " << f;
+    };
+    for (std::uint64_t f = 1; f <= 10; ++f)
+        changeFrame(f);
     SceneInfo& info = room.world.ctx().get<SceneInfo>();
     info.bounds = Aabb{};
     info.bounds.extend(glm::vec3(-1.f, 0.f, -1.f));
     info.bounds.extend(glm::vec3(1.f, 1.f, 1.f));
     room.system.build(room.world);
-    room.frame(11); // the new volume's first projection
+    changeFrame(11); // the new volume's first projection (it reads the delta too)
     const auto count = std::uint32_t(room.probes().size());
     ASSERT_LT(count, 70u);
     SweepTrack track{0, 7, count};
     for (std::uint64_t f = 12; f <= 20; ++f) {
-        room.frame(f);
+        changeFrame(f);
         const std::span<const std::uint32_t> refreshed = room.system.lastRefreshed();
-        EXPECT_EQ(std::set<std::uint32_t>(refreshed.begin(), refreshed.end()), track.next())
+        EXPECT_EQ(std::set<std::uint32_t>(refreshed.begin(), refreshed.end()), track.next(true))
             << "frame " << f;
         EXPECT_EQ(refreshed.size(), 7u);
     }
@@ -1768,8 +1801,9 @@ TEST(ShProbes, TheSweepStartsOverInAVolumeRebuiltSmaller) {
 
 TEST(ShProbes, TheSweepPutsRightWhatTheMarkingRulesLetThrough) {
     // The scene of the test below: after the cube's push, once nothing is stale and the
-    // sweep has gone round the volume once more, every probe equals a fresh projection of the
-    // final state bit for bit: incremental equals full, with no bound left to state.
+    // sweep has gone round the volume after it and rests, every probe equals a fresh
+    // projection of the final state bit for bit: incremental equals full, with no bound left
+    // to state.
     constexpr std::uint32_t kSweep = 16;
     MobileRoom room(16, 4, 200'000, kSweep);
     Registry& world = room.world;
@@ -1781,13 +1815,15 @@ TEST(ShProbes, TheSweepPutsRightWhatTheMarkingRulesLetThrough) {
         room.frame(++frame);
     }
     const std::size_t count = room.probes().size();
-    for (std::size_t swept = 0; swept < count;) {
-        ASSERT_LT(frame, 1000u) << "the sweep does not go round";
+    std::size_t swept = 0;
+    do { // until the sweep rests, one round after the push
+        ASSERT_LT(frame, 1000u) << "the sweep does not rest";
         room.frame(++frame);
         ASSERT_TRUE(world.ctx().get<PhotonDelta>().empty()) << "frame " << frame;
         ASSERT_EQ(room.system.staleCount(), 0u);
         swept += room.system.lastFrame().swept;
-    }
+    } while (room.system.lastFrame().swept > 0);
+    EXPECT_GT(swept, 0u);
     const std::vector<sh::ShRgb> kept = room.probes();
     room.system.projectAll(world);
     const std::vector<sh::ShRgb> fresh = room.probes();
