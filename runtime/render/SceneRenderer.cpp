@@ -212,6 +212,7 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
                            scene.vlf->tileSize, scene.vlf->directionCount);
         glProgramUniform4f(program, kVlfFrame, scene.vlf->center.x, scene.vlf->center.y,
                            scene.vlf->center.z, scene.vlf->radius);
+        glProgramUniform1f(program, kVlfCellScale, scene.vlf->cellScale);
     } else {
         glBindTextureUnit(kVlfAtlasUnit, mWhite.id());
     }
@@ -273,7 +274,8 @@ void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
     if (width > maxSize || rows * m > maxSize)
         fail("VLF tile atlas of ", width, "x", rows * m, " texels exceeds the GL limit ", maxSize,
              " (fewer directions or lines, or smaller tiles)");
-    std::vector<glm::vec4> texels(std::size_t(width) * std::size_t(rows * m), glm::vec4(0.f));
+    std::vector<glm::u16vec4> texels(std::size_t(width) * std::size_t(rows * m),
+                                     glm::u16vec4(0)); // half floats: 0 is +0
     for (std::size_t t = 0; t < tiles; ++t) {
         const std::size_t x0 = (t % kVlfAtlasTiles) * std::size_t(m);
         const std::size_t y0 = (t / kVlfAtlasTiles) * std::size_t(m);
@@ -283,13 +285,15 @@ void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
                     vlf.cells[t * std::size_t(m * m) + std::size_t(v * m + u)];
     }
     mVlfAtlas = createTexture(GL_TEXTURE_2D);
-    glTextureStorage2D(mVlfAtlas.id(), 1, GL_RGBA32F, width, rows * m);
+    glTextureStorage2D(mVlfAtlas.id(), 1, GL_RGBA16F, width, rows * m);
     useTightUnpacking();
-    glTextureSubImage2D(mVlfAtlas.id(), 0, 0, 0, width, rows * m, GL_RGBA, GL_FLOAT, texels.data());
+    glTextureSubImage2D(mVlfAtlas.id(), 0, 0, 0, width, rows * m, GL_RGBA, GL_HALF_FLOAT,
+                        texels.data());
     glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     glTextureParameteri(mVlfAtlas.id(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     mVlfVersion = vlf.version;
-    logInfo("VLF uploaded: ", tiles, " tiles in a ", width, "x", rows * m, " atlas");
+    logInfo("VLF uploaded: ", tiles, " tiles in a ", width, "x", rows * m,
+            " atlas of half floats (", double(texels.size() * sizeof(glm::u16vec4)) / 1e6, " MB)");
 }
 
 void SceneRenderer::tonemapAndPresent() {

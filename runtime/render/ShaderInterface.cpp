@@ -29,6 +29,7 @@ std::string shaderInterfaceDefines() {
     define("UNIFORM_VLF_FACES", kVlfFaces);
     define("UNIFORM_VLF_PARAMS", kVlfParams);
     define("UNIFORM_VLF_FRAME", kVlfFrame);
+    define("UNIFORM_VLF_CELL_SCALE", kVlfCellScale);
     define("VLF_ATLAS_UNIT", kVlfAtlasUnit);
     define("VLF_DIRECTIONS_BINDING", kVlfDirectionsBinding);
     define("VLF_TRIANGLES_BINDING", kVlfTrianglesBinding);

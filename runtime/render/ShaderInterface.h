@@ -25,6 +25,7 @@ constexpr int kVlfFrame = 29;  // vec4: VLF centre, radius
 constexpr int kPointCacheGrid = 30;   // vec4: grid origin, cell size (shaders/common/pointcache.glsl)
 constexpr int kPointCacheDims = 31;   // ivec4: cells per axis, falloff exponent
 constexpr int kPointCacheParams = 32; // vec4: min normal cosine, plane tolerance, enabled, show
+constexpr int kVlfCellScale = 33;     // float: the VLF atlas holds radiance / this
 
 // Texture units and buffer binding points.
 constexpr int kBaseColorUnit = 0;

@@ -29,6 +29,7 @@ layout(binding = VLF_ATLAS_UNIT) uniform sampler2D uVlfAtlas; // tiles, VLF_ATLA
 layout(location = UNIFORM_VLF_FACES) uniform ivec2 uVlfFaceRange; // first face, count (0: none)
 layout(location = UNIFORM_VLF_PARAMS) uniform ivec4 uVlfParams;   // level, N, m, directions
 layout(location = UNIFORM_VLF_FRAME) uniform vec4 uVlfFrame;      // centre xyz, radius
+layout(location = UNIFORM_VLF_CELL_SCALE) uniform float uVlfCellScale; // atlas: radiance / this
 
 // The four children of a spherical triangle in descent order (see DirectionSet.cpp).
 void vlfChild(inout vec3 a, inout vec3 b, inout vec3 c, vec3 d, out int child) {
@@ -88,7 +89,7 @@ vec3 vlfCells(int sf, int psf, vec3 p, out float w) {
         sum += wk * value.rgb;
         w += wk;
     }
-    return w > 0.0 ? sum / w : vec3(0.0);
+    return w > 0.0 ? sum * (uVlfCellScale / w) : vec3(0.0);
 }
 
 // Specular radiance, W/(m^2 sr), leaving world point p (shading normal n) towards the viewer.

@@ -198,7 +198,7 @@ const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
         t.blocks.emplace_back(b.tw, std::int32_t(b.firstSlot), 0, 0);
     }
     t.slots = v.slots();
-    t.cells = v.tiles();
+    t.cellScale = packVlfCells(v.tiles(), t.cells);
     mVlf = std::move(t);
     mVlfSource = field;
     mVlfKey = v.key();

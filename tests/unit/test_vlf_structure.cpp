@@ -1,11 +1,13 @@
 // The VLF structure: direction set, triangle lookup, cells, subfield frames, tiling, memory.
 #include "components/Material.h"
 #include "runtime/core/Error.h"
+#include "runtime/render/RenderScene.h"
 #include "systems/vlf/DirectionSet.h"
 #include "systems/vlf/Vlf.h"
 #include "test_vlf_scenes.h"
 
 #include <glm/gtc/constants.hpp>
+#include <glm/gtc/packing.hpp>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -408,3 +410,54 @@ TEST(VlfMaterials, MetallicRoughnessBecomesAPhongLobeUnlessItIsRough) {
 
 } // namespace
 } // namespace qgi::vlf
+
+// ---- the renderer's half-float cells ----------------------------------------------------------
+
+TEST(VlfGpuCells, HalfFloatsHoldEachValueWithinTheirRoundingAndTheFlagOfEachCell) {
+    // Radiance from 1e-3 to 1e4 (scale 1): each component within 2^-11 of itself, the
+    // nearest-half rounding of a normal half float (11 significant bits); the weight becomes
+    // 1 or 0.
+    std::mt19937 random(11);
+    std::uniform_real_distribution<float> exponent(-3.f, 4.f);
+    std::vector<glm::vec4> cells;
+    for (int i = 0; i < 10'000; ++i)
+        cells.emplace_back(std::pow(10.f, exponent(random)), std::pow(10.f, exponent(random)),
+                           std::pow(10.f, exponent(random)),
+                           i % 3 == 0 ? 0.f : 0.25f * float(i % 5));
+    std::vector<glm::u16vec4> packed;
+    ASSERT_EQ(packVlfCells(cells, packed), 1.f);
+    ASSERT_EQ(packed.size(), cells.size());
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+        for (int c = 0; c < 3; ++c) {
+            const float back = glm::unpackHalf1x16(packed[i][c]);
+            EXPECT_LE(std::abs(back - cells[i][c]), std::ldexp(cells[i][c], -11)) << i << ", " << c;
+        }
+        EXPECT_EQ(glm::unpackHalf1x16(packed[i].w), cells[i].w > 0.f ? 1.f : 0.f) << i;
+    }
+}
+
+TEST(VlfGpuCells, ABrightCellScalesTheWholeTableByAPowerOfTwo) {
+    // 1e6 W/(m^2 sr) (a small, strong lamp seen in a mirror) would overflow a half float: the
+    // table is divided by 64, the smallest power of two that brings it under 16384, and every
+    // value keeps its relative precision. What is not radiance (negative, NaN, infinite)
+    // reads 0; a value far below the scale keeps an absolute precision of 2^-25 of it.
+    const std::vector<glm::vec4> cells = {
+        {1e6f, 3.f, 0.5f, 1.f},
+        {-1.f, std::nanf(""), std::numeric_limits<float>::infinity(), 1.f},
+        {1e-7f, 2e-3f, 7.f, 1.f}};
+    std::vector<glm::u16vec4> packed;
+    const float scale = packVlfCells(cells, packed);
+    ASSERT_EQ(scale, 64.f);
+    for (const std::size_t i : {std::size_t(0), std::size_t(2)})
+        for (int c = 0; c < 3; ++c) {
+            const float back = scale * glm::unpackHalf1x16(packed[i][c]);
+            EXPECT_LE(std::abs(back - cells[i][c]),
+                      std::max(std::ldexp(cells[i][c], -11), std::ldexp(scale, -25)))
+                << i << ", " << c;
+        }
+    for (int c = 0; c < 3; ++c)
+        EXPECT_EQ(glm::unpackHalf1x16(packed[1][c]), 0.f) << c;
+    std::vector<glm::u16vec4> none;
+    EXPECT_EQ(packVlfCells({}, none), 1.f);
+    EXPECT_TRUE(none.empty());
+}
