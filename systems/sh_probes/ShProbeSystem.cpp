@@ -135,6 +135,7 @@ void ShProbeSystem::build(Registry& registry) {
             for (const glm::vec3& p : mesh.positions)
                 m.objectBounds.extend(p);
             m.worldBounds = transformBox(m.objectBounds, world.matrix);
+            m.pose = world.matrix;
             m.active = !outOfWorld(registry, e);
             mMobiles.emplace(e, m);
         });
@@ -476,8 +477,10 @@ bool ShProbeSystem::markChanges(const Registry& registry) {
         markAllStale();
         mVolume->invalidateVisibility();
         for (auto& [entity, mobile] : mMobiles) {
-            if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity))
+            if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity)) {
                 mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
+                mobile.pose = w->matrix;
+            }
             mobile.active = !outOfWorld(registry, entity);
         }
         return true;
@@ -500,7 +503,10 @@ bool ShProbeSystem::markChanges(const Registry& registry) {
         const Aabb now = transformBox(mobile.objectBounds, world->matrix);
         const bool active = !outOfWorld(registry, e);
         const bool wasActive = std::exchange(mobile.active, active);
-        const bool moved = now.min != mobile.worldBounds.min || now.max != mobile.worldBounds.max;
+        // A turn or a flip can keep the bounds bit for bit, and still show the probes another
+        // side of the mobile.
+        const bool moved = world->matrix != std::exchange(mobile.pose, world->matrix) ||
+                           now.min != mobile.worldBounds.min || now.max != mobile.worldBounds.max;
         // Patched without a change, or moved while out of the world: nothing to see.
         if ((!wasActive && !active) || (wasActive == active && !moved)) {
             mobile.worldBounds = now;
@@ -782,8 +788,10 @@ void ShProbeSystem::update(Registry& registry, const FrameContext&) {
             mStats.refreshed = mVolume->probeCount();
             // The projection saw every mobile where it is now.
             for (auto& [entity, mobile] : mMobiles)
-                if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity))
+                if (const WorldTransform* w = registry.tryGet<WorldTransform>(entity)) {
                     mobile.worldBounds = transformBox(mobile.objectBounds, w->matrix);
+                    mobile.pose = w->matrix;
+                }
         } else {
             if (markChanges(registry)) mSweepOwed = std::uint32_t(mStale.size()); // a round
             mStats.staleBefore = mStaleCount;

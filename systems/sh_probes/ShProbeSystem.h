@@ -151,8 +151,9 @@ private:
     };
     struct Mobile {
         Aabb objectBounds;
-        Aabb worldBounds;   ///< at the pose the probes last saw
-        bool active = true; ///< MobileMesh::active as the probes last saw it
+        Aabb worldBounds;    ///< at the pose the probes last saw
+        glm::mat4 pose{1.f}; ///< the pose the probes last saw (a turn may keep the bounds)
+        bool active = true;  ///< MobileMesh::active as the probes last saw it
     };
 
     void snapshot(const Registry& registry);

@@ -394,19 +394,20 @@ std::optional<glm::vec3> Vlf::lookupTiles(const std::vector<glm::vec4>& cells, s
     return sum / wsum;
 }
 
-glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x,
-                                const glm::vec3& toViewer) const {
+glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer,
+                                const std::vector<glm::vec4>* cells) const {
     const Face& f = mFaces[face];
     if (!f.isSpecular()) return glm::vec3(0.f);
+    const std::vector<glm::vec4>& tiles = cells ? *cells : mTiles;
     std::optional<glm::vec3> value;
     if (f.isMirror()) {
         // Tiles hold incident light, indexed by the front-side direction it arrives from:
         // what the viewer sees arrives from the reflected view direction.
         const glm::vec3 from = 2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer;
-        value = lookupTiles(mTiles, face, x, from);
+        value = lookupTiles(tiles, face, x, from);
         if (value) *value *= f.specular;
     } else {
-        value = lookupTiles(mTiles, face, x, toViewer);
+        value = lookupTiles(tiles, face, x, toViewer);
     }
     return value.value_or(glm::vec3(0.f));
 }

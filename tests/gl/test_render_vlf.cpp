@@ -21,6 +21,7 @@
 #include <epoxy/gl.h>
 #include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/packing.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -121,11 +122,19 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelow
         bakeField(world, 3, 32, 8, 2);
         const VlfField& field = world.ctx().get<VlfField>();
         ASSERT_EQ(field.vlf.specularFaceCount(), faceBelowFirst ? 2u : 1u);
+        // The cells as the renderer's atlas holds them (half floats times a power of two),
+        // for the CPU lookup the shader is held to.
         std::vector<glm::u16vec4> packed;
         const float cellScale = packVlfCells(field.vlf.tiles(), packed);
         if (brightness > 1e4f) {
             ASSERT_GT(cellScale, 1.f) << "the atlas is not scaled";
         }
+        std::vector<glm::vec4> atlasCells(packed.size());
+        for (std::size_t i = 0; i < packed.size(); ++i)
+            atlasCells[i] = glm::vec4(cellScale * glm::unpackHalf1x16(packed[i].x),
+                                      cellScale * glm::unpackHalf1x16(packed[i].y),
+                                      cellScale * glm::unpackHalf1x16(packed[i].z),
+                                      glm::unpackHalf1x16(packed[i].w));
 
         // Photon mode, no direct light: the floor shows the VLF alone.
         const ImageF hdr = renderFrame(world, ShadingMode::Photon);
@@ -139,7 +148,7 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelow
         ASSERT_GT(field.vlf.faces()[face].normal.y, 0.99f); // the floor
         const auto lookup = [&](const glm::dvec3& p) {
             return field.vlf.specularRadiance(face, glm::vec3(p),
-                                              glm::vec3(glm::normalize(eyeAt - p)));
+                                              glm::vec3(glm::normalize(eyeAt - p)), &atlasCells);
         };
         // Where the GPU's floor point may lie. The rasterizer snaps vertices to its sub-pixel
         // grid (2^-GL_SUBPIXEL_BITS of a pixel), so the position a pixel interpolates is that
@@ -161,10 +170,10 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelow
         // The lookup's own arithmetic: ~20 roundings of positive terms in each blend (12 cells,
         // 3 corners, the divisions), ~10 more in the weights, whose errors a contrast of up to
         // 6 between neighbouring cells amplifies; on both sides: 2 (20 + 6 * 10) 2^-24 < 2^-16.
-        // The atlas holds each cell as a half float, within 2^-11 of the baked value (scale
-        // 1 here: packVlfCells), and a blend of positive values with positive weights keeps
-        // that relative bound.
-        constexpr double kRounding = 0x1p-16 + 0x1p-11; // relative
+        // The CPU lookup reads the cells the atlas holds (above), so their half-float rounding
+        // is on both sides; the shader's multiplication by the scale after the blend, where the
+        // CPU's cells were multiplied before it, adds a rounding or two.
+        constexpr double kRounding = 0x1p-16; // relative
         int floorPixels = 0, failed = 0, lit = 0, loose = 0, wallPixels = 0, wrongWalls = 0;
         // The walls show their emission and nothing else (black, no irradiance, photon mode):
         // where a pixel's ray leaves the room through one wall, 2 cm and more from its rims,

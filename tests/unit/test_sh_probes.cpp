@@ -1757,6 +1757,65 @@ TEST(ShProbes, TheSweepReachesStaleProbesTheBudgetKeepsPassingOver) {
     EXPECT_GT(passedOver, 0u);
 }
 
+TEST(ShProbes, WithNoBudgetTheSweepRefreshesEveryProbeALightChangeMarked) {
+    // A light's intensity changed marks every probe stale. With no budget the sweep alone
+    // re-projects them, one round of 50 a frame from the change on, and then nothing is stale.
+    MobileRoom room(0, 4, 0, 50);
+    const auto count = std::uint32_t(room.probes().size());
+    const Entity light = room.world.view<const PointLight>().entities().front();
+    room.world.patch<PointLight>(light).intensity = 20.f;
+    room.frame(1);
+    EXPECT_EQ(room.system.lastFrame().markedStale, count);
+    const std::uint32_t round = (count + 49) / 50;
+    for (std::uint64_t f = 2; f <= round; ++f) {
+        ASSERT_GT(room.system.staleCount(), 0u) << "frame " << f;
+        room.frame(f);
+    }
+    EXPECT_EQ(room.system.staleCount(), 0u);
+    room.frame(round + 1);
+    EXPECT_EQ(room.system.lastFrame().refreshed, 0u) << "the sweep did not rest";
+}
+
+TEST(ShProbes, AMobileTurnedWithinItsBoundsMarksTheProbesNearIt) {
+    // A panel facing +x, turned half round about its vertical axis, faces -x: its bounds stay
+    // bit for bit, but the probes on either side now see its other face (back faces are dark).
+    Registry world;
+    addMesh(world, test::gridMesh({-3.f, 0.f, 3.f}, {6.f, 0.f, 0.f}, {0.f, 0.f, -6.f}, 12),
+            glm::mat4(1.f), grey(0.5f), false, "floor");
+    const Entity panel =
+        addMesh(world, test::gridMesh({0.f, 0.f, 0.5f}, {0.f, 0.f, -1.f}, {0.f, 1.f, 0.f}, 4),
+                translation({0.f, 0.2f, 0.f}), grey(0.8f), true, "panel");
+    addPointLight(world, {1.f, 1.5f, 0.f}, 10.f);
+    addSceneInfo(world, {-3.f, 0.f, -3.f}, {3.f, 2.f, 3.f});
+    test::buildRayScene(world);
+    ShProbeSystem system(MobileRoom::settings(16, 4, 4));
+    system.build(world);
+    system.update(world, FrameContext{0});
+    world.clearChanges();
+    // The panel's world bounds at a pose, as the system computes them (its object box's
+    // corners transformed).
+    const auto bounds = [&](const glm::mat4& pose) {
+        Aabb object, out;
+        for (const glm::vec3& p : world.get<Mesh>(panel).positions)
+            object.extend(p);
+        for (int k = 0; k < 8; ++k)
+            out.extend(glm::vec3(pose * glm::vec4(k & 1 ? object.max.x : object.min.x,
+                                                  k & 2 ? object.max.y : object.min.y,
+                                                  k & 4 ? object.max.z : object.min.z, 1.f)));
+        return out;
+    };
+    const Aabb before = bounds(world.get<WorldTransform>(panel).matrix);
+    const glm::mat4 turned =
+        translation({0.f, 0.2f, 0.f}) * glm::scale(glm::mat4(1.f), glm::vec3(-1.f, 1.f, -1.f));
+    ASSERT_EQ(bounds(turned).min, before.min);
+    ASSERT_EQ(bounds(turned).max, before.max);
+    world.patch<WorldTransform>(panel).matrix = turned;
+    world.ctx().get<RayScene>().syncMoved(world);
+    system.update(world, FrameContext{1});
+    EXPECT_GT(system.lastFrame().markedStale, 0u);
+    EXPECT_GT(system.lastFrame().swept, 0u);
+}
+
 TEST(ShProbes, WithNoBudgetTheSweepAloneRefreshesStaleProbes) {
     MobileRoom room(0, 4, 0, 50);
     const auto count = std::uint32_t(room.probes().size());
