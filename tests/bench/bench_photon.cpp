@@ -49,10 +49,9 @@
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/scene/BuiltinSceneBuilder.h"
 #include "runtime/scene/BuiltinScenes.h"
-#include "runtime/scene/MeshProcessing.h"
 #include "runtime/scene/SceneInfo.h"
-#include "runtime/scene/SceneQueries.h"
 #include "systems/detp/DetpIrradianceSystem.h"
 #include "systems/photon_update/PhotonPathGrid.h"
 #include "systems/photon_update/PhotonStore.h"
@@ -90,24 +89,25 @@ std::uint32_t photonsFor(const std::string& scene) {
     return scene == "atrium" ? 4'000'000 : 1'000'000;
 }
 
-/// An axis-aligned box of half extents `half` centred on `centre`, facing out (or in: a room),
-/// refined for per-vertex lighting to 10 cm edges.
-Mesh refinedBox(const glm::vec3& centre, const glm::vec3& half, bool inward) {
-    Mesh raw;
-    for (int i = 0; i < 8; ++i)
-        raw.positions.push_back(centre + glm::vec3(i & 1 ? half.x : -half.x,
-                                                   i & 2 ? half.y : -half.y,
-                                                   i & 4 ? half.z : -half.z));
-    // Each face's corners counter-clockwise seen from outside.
-    const std::uint32_t faces[6][4] = {{0, 4, 6, 2}, {1, 3, 7, 5}, {0, 1, 5, 4},
-                                       {2, 6, 7, 3}, {0, 2, 3, 1}, {4, 5, 7, 6}};
-    for (const auto& f : faces) {
-        const std::uint32_t a = f[0], b = inward ? f[3] : f[1], c = f[2], d = inward ? f[1] : f[3];
-        raw.indices.insert(raw.indices.end(), {a, b, c, a, c, d});
+/// The walls of a closed room: an axis-aligned box of half extents `half` centred on
+/// `centre`, facing in.
+ProceduralMesh roomMesh(const glm::vec3& centre, const glm::vec3& half) {
+    ProceduralMesh mesh;
+    for (int axis = 0; axis < 3; ++axis) {
+        const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+        for (const float side : {-1.f, 1.f}) {
+            glm::vec3 corner[4], facing(0.f);
+            facing[axis] = -side;
+            for (int k = 0; k < 4; ++k) {
+                corner[k] = centre;
+                corner[k][axis] += side * half[axis];
+                corner[k][u] += (k == 1 || k == 2 ? 1.f : -1.f) * half[u];
+                corner[k][v] += (k >= 2 ? 1.f : -1.f) * half[v];
+            }
+            mesh.addQuad(corner[0], corner[1], corner[2], corner[3], facing);
+        }
     }
-    MeshProcessingOptions options;
-    options.maxEdgeLength = 0.1f;
-    return processMesh(raw, options);
+    return mesh;
 }
 
 /// kTwoRooms with `photons` in all: two closed 3 x 2.4 x 3 m rooms 1.5 m apart (albedo 0.6),
@@ -117,36 +117,33 @@ Mesh refinedBox(const glm::vec3& centre, const glm::vec3& half, bool inward) {
 /// the rest. No path leaves its room, so the paths the moving cube can touch are the same at
 /// any photon count.
 void buildTwoRooms(Registry& registry, std::uint32_t photons) {
+    BuiltinSceneBuilder builder(registry, kTwoRooms, 0.1f); // meshes refined to 10 cm
     Material wall;
     wall.baseColor = glm::vec3(0.6f);
-    const auto add = [&](const char* name, Mesh mesh, bool mobile) {
-        const Entity e = registry.create();
-        registry.emplace<Name>(e, name);
-        registry.emplace<Mesh>(e, std::move(mesh));
-        registry.emplace<WorldTransform>(e, glm::mat4(1.f));
-        registry.emplace<Material>(e, wall);
-        if (mobile)
-            registry.emplace<MobileMesh>(e);
-        else
-            registry.emplace<StaticMesh>(e);
-    };
     const glm::vec3 room(1.5f, 1.2f, 1.5f), cube(0.15f);
     const float firstIntensity = 10.f;
     for (int r = 0; r < 2; ++r) {
         const glm::vec3 centre(4.5f * float(r), room.y, 0.f);
-        add(r == 0 ? "first room" : "second room", refinedBox(centre, room, true), false);
-        add(r == 0 ? "cube" : "static cube",
-            refinedBox(centre + glm::vec3(0.4f, cube.y + 0.02f - room.y, 0.3f), cube, false),
-            r == 0);
-        const Entity light = registry.create();
-        registry.emplace<WorldTransform>(
-            light, glm::translate(glm::mat4(1.f), centre + glm::vec3(0.f, 0.8f * room.y, 0.f)));
+        registry.emplace<StaticMesh>(builder.addMesh(r == 0 ? "first room" : "second room",
+                                                     Transform{}, roomMesh(centre, room), wall));
+        const glm::vec3 at = centre + glm::vec3(0.4f, cube.y + 0.02f - room.y, 0.3f);
+        ProceduralMesh block;
+        block.addBox(at - cube, at + cube);
+        const Entity e =
+            builder.addMesh(r == 0 ? "cube" : "static cube", Transform{}, std::move(block), wall);
+        if (r == 0)
+            registry.emplace<MobileMesh>(e);
+        else
+            registry.emplace<StaticMesh>(e);
+        const Entity light =
+            builder.addEntity(r == 0 ? "first light" : "second light",
+                              Transform{centre + glm::vec3(0.f, 0.8f * room.y, 0.f)});
         const float share = r == 0 ? 1.f
                                    : float(photons - std::min(photons, kFirstRoomPhotons)) /
                                          float(kFirstRoomPhotons);
         registry.emplace<PointLight>(light, PointLight{glm::vec3(1.f), share * firstIntensity});
     }
-    registry.ctx().emplace<SceneInfo>(describeMeshes(registry));
+    builder.finish(glm::vec3(0.f)); // closed rooms: no sky
 }
 
 /// A built-in scene with its ray scene and photon system, shot once per process.
