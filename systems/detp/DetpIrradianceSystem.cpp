@@ -502,11 +502,7 @@ void DetpIrradianceSystem::splitDelta(const PhotonStore& store, const PhotonDelt
                       [&](const tbb::blocked_range<std::size_t>& range) {
                           for (std::size_t i = range.begin(); i != range.end(); ++i) {
                               const PhotonPath& path = store.paths[delta.paths[i]];
-                              const std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
-                              const std::uint32_t head =
-                                  o < delta.oldFirst[i + 1]   ? before.bounce[o]
-                                  : n < delta.newFirst[i + 1] ? after.bounce[n]
-                                                              : 0;
+                              const auto head = std::uint32_t(std::max(delta.head(i), 0));
                               mPrefixEnd[i] = head > 0 && head <= path.count
                                                   ? store.segments.hitEntity[path.first + head - 1]
                                                   : Entity{};

@@ -17,13 +17,9 @@ void DeltaByPath::arrange(const PhotonDelta& delta) {
     order.clear();
     head.assign(paths, 0);
     for (std::size_t i = 0; i < paths; ++i) {
-        const std::uint32_t o = delta.oldFirst[i], n = delta.newFirst[i];
-        if (o < delta.oldFirst[i + 1])
-            head[i] = delta.oldSegments.bounce[o];
-        else if (n < delta.newFirst[i + 1])
-            head[i] = delta.newSegments.bounce[n];
-        else
-            continue; // nothing of it changed
+        const std::int32_t first = delta.head(i);
+        if (first < 0) continue; // nothing of it changed
+        head[i] = std::uint32_t(first);
         order.push_back(std::uint32_t(i));
     }
     // The photon update lists re-shot paths first, then re-traced ones in path order.

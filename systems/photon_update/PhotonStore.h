@@ -136,6 +136,13 @@ struct PhotonDelta {
 
     bool empty() const { return !full && paths.empty() && relabels.empty(); }
     void clear();
+    /// Delta path i's first replaced segment: k of the first of its old or new suffix
+    /// (segment k of a stored path has bounce k); -1 when both suffixes are empty.
+    std::int32_t head(std::size_t i) const {
+        if (oldFirst[i] < oldFirst[i + 1]) return oldSegments.bounce[oldFirst[i]];
+        if (newFirst[i] < newFirst[i + 1]) return newSegments.bounce[newFirst[i]];
+        return -1;
+    }
 };
 
 /// Reads each PhotonDelta once, by its sequence, for a consumer that applies deltas to sums of
