@@ -23,17 +23,6 @@ ProbeGrid ProbeGrid::over(const Aabb& bounds, float spacing) {
     return grid;
 }
 
-void ProbeGrid::locate(const glm::vec3& p, glm::ivec3& cell, glm::vec3& t) const {
-    const glm::vec3 g = (p - origin) / spacing;
-    for (int a = 0; a < 3; ++a) {
-        // NaN goes to 0 (std::clamp keeps NaN; fmax drops it).
-        const float clamped = std::fmin(std::fmax(g[a], 0.f), float(counts[a] - 1));
-        const int i = std::min(int(clamped), counts[a] - 2);
-        cell[a] = i;
-        t[a] = std::min(1.f, clamped - float(i));
-    }
-}
-
 ProbeVolume::ProbeVolume(const ProbeGrid& grid, std::uint32_t visibilitySubdivisions)
     : mGrid(grid), mSubdivisions(visibilitySubdivisions) {
     QGI_ASSERT(visibilitySubdivisions >= 1 && visibilitySubdivisions <= 16);

@@ -57,7 +57,19 @@ struct ProbeGrid {
                 int(index / (std::uint32_t(n.x) * std::uint32_t(n.y)))};
     }
     /// The cell holding `p` (clamped into the lattice) and p's position in it, each in [0, 1].
-    void locate(const glm::vec3& p, glm::ivec3& cell, glm::vec3& t) const;
+    void locate(const glm::vec3& p, glm::ivec3& cell, glm::vec3& t) const {
+        const glm::vec3 g = (p - origin) / spacing;
+        for (int a = 0; a < 3; ++a) {
+            // NaN goes to 0: both comparisons are false for it. (Written out rather than
+            // std::fmin/fmax, which the compiler calls into libm for.)
+            const float top = float(counts[a] - 1);
+            float clamped = g[a] > 0.f ? g[a] : 0.f;
+            clamped = clamped < top ? clamped : top;
+            const int i = std::min(int(clamped), counts[a] - 2);
+            cell[a] = i;
+            t[a] = std::min(1.f, clamped - float(i));
+        }
+    }
 };
 
 /// What one interpolation did (for tests and statistics).

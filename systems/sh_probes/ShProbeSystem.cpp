@@ -705,26 +705,75 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
     if (!mBuilt) return;
     ProbeVolume& volume = *mVolume;
     const ProbeGrid& grid = volume.grid();
+    // Past the outer probes an avatar takes the nearest ones' light: say so, once per avatar.
+    const glm::vec3 low = grid.origin - grid.spacing;
+    const glm::vec3 high = grid.origin + grid.spacing * glm::vec3(grid.counts);
+    const auto light = [&](Entity e, const glm::vec3& p, ShLighting& lighting) {
+        if (glm::any(glm::lessThan(p, low)) || glm::any(glm::greaterThan(p, high))) {
+            ++mStats.outside;
+            if (mWarnedOutside.insert(e).second) {
+                logWarning("SH probes: avatar ", entityName(registry, e),
+                           " is outside the probe volume; it takes the light of the nearest "
+                           "probes");
+            }
+        }
+        ProbeBlend blend;
+        sh::ShRgb blended;
+        if (!isFinite(p) || !volume.interpolate(p, blended, &blend)) {
+            ++mStats.unlit; // left as it was
+            return;
+        }
+        mStats.fallbacks += blend.fallback;
+        if (blend.hidden) {
+            // Every probe around it is behind a wall (a closet narrower than the probe
+            // spacing): blending them anyway would light it through the walls. It keeps the
+            // light it had.
+            ++mStats.hidden;
+            if (mWarnedHidden.insert(e).second)
+                logWarning("SH probes: avatar ", entityName(registry, e),
+                           " stands where every probe around it is behind a wall (a space "
+                           "narrower than the ",
+                           grid.spacing,
+                           " m probe spacing); it keeps its last lighting there (none, if it "
+                           "has not been lit yet)");
+            return;
+        }
+        lighting.coefficients = blended;
+        ++mStats.avatars;
+    };
 
-    // New avatars get their ShLighting first, so the lookup loop changes no pool; and the
-    // cells visited for the first time (or since a mobile moved through them) are collected.
+    // One pass lights the avatars that have their ShLighting and stand in a cell whose
+    // visibility lattice is ready. The others wait for after the pass: new avatars get their
+    // ShLighting then (so the pass changes no pool), and the cells visited for the first time
+    // (or since a mobile moved through them) have their lattices computed, in parallel.
     mAvatarEntities.clear();
     mPendingCells.clear();
     registry.view<const Avatar, const WorldTransform>().each(
         [&](Entity e, const Avatar&, const WorldTransform& world) {
-            if (!registry.has<ShLighting>(e)) mAvatarEntities.push_back(e);
             const glm::vec3 p(world.matrix[3]);
-            if (!isFinite(p)) return;
-            glm::ivec3 cell;
-            glm::vec3 t;
-            grid.locate(p, cell, t);
-            const std::uint32_t index = grid.cellIndex(cell);
-            if (volume.visibilityReady(index) || mCellQueued[index]) return;
-            mCellQueued[index] = 1;
-            mPendingCells.push_back(index);
+            bool ready = true;
+            if (isFinite(p)) {
+                glm::ivec3 cell;
+                glm::vec3 t;
+                grid.locate(p, cell, t);
+                const std::uint32_t index = grid.cellIndex(cell);
+                if (!volume.visibilityReady(index)) {
+                    ready = false;
+                    if (!mCellQueued[index]) {
+                        mCellQueued[index] = 1;
+                        mPendingCells.push_back(index);
+                    }
+                }
+            }
+            ShLighting* lighting = registry.tryGet<ShLighting>(e);
+            if (ready && lighting)
+                light(e, p, *lighting);
+            else
+                mAvatarEntities.push_back(e);
         });
+    if (mAvatarEntities.empty()) return;
     for (const Entity e : mAvatarEntities)
-        registry.emplace<ShLighting>(e);
+        if (!registry.has<ShLighting>(e)) registry.emplace<ShLighting>(e);
     if (!mPendingCells.empty()) {
         tbb::parallel_for(std::size_t(0), mPendingCells.size(),
                           [&](std::size_t i) { computeVisibility(mPendingCells[i], volume); });
@@ -732,45 +781,8 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
             mCellQueued[c] = 0;
     }
     mStats.visibilityCells += mPendingCells.size();
-
-    // Past the outer probes an avatar takes the nearest ones' light: say so, once per avatar.
-    const glm::vec3 low = grid.origin - grid.spacing;
-    const glm::vec3 high = grid.origin + grid.spacing * glm::vec3(grid.counts);
-    registry.view<const Avatar, const WorldTransform, ShLighting>().each(
-        [&](Entity e, const Avatar&, const WorldTransform& world, ShLighting& lighting) {
-            const glm::vec3 p(world.matrix[3]);
-            if (glm::any(glm::lessThan(p, low)) || glm::any(glm::greaterThan(p, high))) {
-                ++mStats.outside;
-                if (mWarnedOutside.insert(e).second) {
-                    logWarning("SH probes: avatar ", entityName(registry, e),
-                               " is outside the probe volume; it takes the light of the nearest "
-                               "probes");
-                }
-            }
-            ProbeBlend blend;
-            sh::ShRgb blended;
-            if (!isFinite(p) || !volume.interpolate(p, blended, &blend)) {
-                ++mStats.unlit; // left as it was
-                return;
-            }
-            mStats.fallbacks += blend.fallback;
-            if (blend.hidden) {
-                // Every probe around it is behind a wall (a closet narrower than the probe
-                // spacing): blending them anyway would light it through the walls. It keeps
-                // the light it had.
-                ++mStats.hidden;
-                if (mWarnedHidden.insert(e).second)
-                    logWarning("SH probes: avatar ", entityName(registry, e),
-                               " stands where every probe around it is behind a wall (a space "
-                               "narrower than the ",
-                               grid.spacing,
-                               " m probe spacing); it keeps its last lighting there (none, if it "
-                               "has not been lit yet)");
-                return;
-            }
-            lighting.coefficients = blended;
-            ++mStats.avatars;
-        });
+    for (const Entity e : mAvatarEntities)
+        light(e, glm::vec3(registry.get<WorldTransform>(e).matrix[3]), registry.get<ShLighting>(e));
 }
 
 void ShProbeSystem::update(Registry& registry, const FrameContext&) {
