@@ -19,6 +19,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <numeric>
@@ -77,9 +78,27 @@ void PointCacheSystem::build(Registry& registry) {
         cache.lightCount = std::uint32_t(mLights.size());
         cache.direct.assign(cache.size(), glm::vec3(0.f));
         cache.visibility.assign(cache.size() * mLights.size(), 1.f);
+    }
+    // Shadow samples recorded per (point, light) (none after a load: a loaded point traces
+    // every light the first time it is refreshed).
+    const std::size_t pairs = cache.size() * mLights.size();
+    mSampleWords = s.shadowSamples <= kMaxRecordedSamples ? (s.shadowSamples + 31) / 32 : 0;
+    mReached.assign(mSampleWords > 0 ? pairs * mSampleWords : 0, 0u);
+    mRecorded.assign(cache.size(), 0);
+    mLightStale.assign(mSampleWords > 0 ? pairs : 0, 0);
+    // A shadow ray runs between points offset from the surface and from the light by
+    // photon::offsetFromSurface: at most 1e-4 of the largest coordinate (or 1e-4 m).
+    float magnitude = 1.f;
+    for (int a = 0; a < 3; ++a)
+        magnitude = std::max({magnitude, std::abs(bounds.min[a]), std::abs(bounds.max[a])});
+    for (const AreaLight& light : mLights)
+        for (int a = 0; a < 3; ++a)
+            magnitude = std::max(magnitude, std::abs(light.centre[a]) + light.boundRadius);
+    mRaySlack = 2e-4f * magnitude;
+    if (!mLoaded) {
         std::vector<std::uint32_t> all(cache.size());
         std::iota(all.begin(), all.end(), 0u);
-        shadePoints(*scene, cache, all);
+        shadePoints(*scene, cache, all, /*everyLight=*/true);
         if (!s.cacheFile.empty()) {
             // A file that cannot be written costs the next start a bake, not this one its cache.
             try {
@@ -117,24 +136,52 @@ void PointCacheSystem::build(Registry& registry) {
 }
 
 void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
-                                   std::span<const std::uint32_t> points) {
+                                   std::span<const std::uint32_t> points, bool everyLight) {
     const PointCacheSettings& s = cache.settings;
     const std::size_t lights = mLights.size();
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 16),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                          for (std::size_t k = range.begin(); k != range.end(); ++k) {
-                              const std::uint32_t p = points[k];
-                              glm::vec3 sum(0.f);
-                              for (std::size_t l = 0; l < lights; ++l) {
-                                  const LightSample ls = shadeAreaLight(
-                                      scene, mLights[l], std::uint32_t(l), cache.position[p],
-                                      cache.normal[p], s.shadowSamples, s.seed, cache.dart[p]);
-                                  sum += ls.irradiance;
-                                  cache.visibility[std::size_t(p) * lights + l] = ls.visibility;
-                              }
-                              cache.direct[p] = sum;
-                          }
-                      });
+    std::atomic<std::size_t> traced{0}, replayed{0};
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, points.size(), 16),
+        [&](const tbb::blocked_range<std::size_t>& range) {
+            std::size_t tracedHere = 0, replayedHere = 0;
+            for (std::size_t k = range.begin(); k != range.end(); ++k) {
+                const std::uint32_t p = points[k];
+                const bool all = everyLight || !mRecorded[p];
+                const glm::vec3 x = cache.position[p], n = cache.normal[p];
+                glm::vec3 sum(0.f);
+                for (std::size_t l = 0; l < lights; ++l) {
+                    const std::size_t pl = std::size_t(p) * lights + l;
+                    const auto light = std::uint32_t(l);
+                    LightSample ls;
+                    if (mSampleWords == 0) {
+                        ls = shadeAreaLight(scene, mLights[l], light, x, n, s.shadowSamples, s.seed,
+                                            cache.dart[p]);
+                        ++tracedHere;
+                    } else {
+                        const std::span<std::uint32_t> reached(&mReached[pl * mSampleWords],
+                                                               mSampleWords);
+                        if (all || mLightStale[pl]) {
+                            ls = shadeAreaLight(scene, mLights[l], light, x, n, s.shadowSamples,
+                                                s.seed, cache.dart[p], reached);
+                            ++tracedHere;
+                        } else {
+                            ls = replayAreaLight(mLights[l], light, x, n, s.shadowSamples, s.seed,
+                                                 cache.dart[p], reached);
+                            ++replayedHere;
+                        }
+                        mLightStale[pl] = 0;
+                    }
+                    sum += ls.irradiance;
+                    cache.visibility[pl] = ls.visibility;
+                }
+                cache.direct[p] = sum;
+                if (mSampleWords > 0) mRecorded[p] = 1;
+            }
+            traced += tracedHere;
+            replayed += replayedHere;
+        });
+    mStats.lightsTraced += traced;
+    mStats.lightsReplayed += replayed;
 }
 
 void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments& segments,
@@ -189,14 +236,15 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
     // Whether a segment from some x within h of q to a light passes a moved mobile (old or new
     // pose): moving an end of a segment by h moves each of its points by at most h, so
     // distanceToSegment(c, q, L) < R + h bounds every such x. h = 0: the point test itself.
+    // mRaySlack widens each test by how far a shadow ray's ends lie from x and the light.
     const auto mayShadow = [&](const glm::vec3& q, float h) {
         for (const Move& m : moves)
-            for (const AreaLight& light : mLights)
-                if (distanceToSegment(m.before, q, light.centre) <
-                        m.radiusBefore + light.boundRadius + h ||
-                    distanceToSegment(m.after, q, light.centre) <
-                        m.radiusAfter + light.boundRadius + h)
+            for (const AreaLight& light : mLights) {
+                const float reach = light.boundRadius + mRaySlack + h;
+                if (distanceToSegment(m.before, q, light.centre) < m.radiusBefore + reach ||
+                    distanceToSegment(m.after, q, light.centre) < m.radiusAfter + reach)
                     return true;
+            }
         return false;
     };
     // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
@@ -236,28 +284,33 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
             }
     mStats.shadowCandidates = mCandidates.size();
     // Per candidate: the distance to the nearest moved mobile when a moved mobile (old or new
-    // pose) may stand between it and a light; +inf otherwise.
+    // pose) may stand between it and a light; +inf otherwise. Each such light is marked
+    // stale for the point: its recorded samples no longer hold.
     std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
+    const std::size_t lights = mLights.size();
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, mCandidates.size(), 256),
         [&](const tbb::blocked_range<std::size_t>& range) {
             for (std::size_t i = range.begin(); i != range.end(); ++i) {
                 const std::uint32_t p = mCandidates[i];
                 const glm::vec3 x = cache.position[p], n = cache.normal[p];
-                for (const Move& m : moves)
-                    for (const AreaLight& light : mLights) {
+                for (const Move& m : moves) {
+                    bool between = false;
+                    for (std::size_t l = 0; l < lights; ++l) {
+                        const AreaLight& light = mLights[l];
                         // A light wholly below the point's horizon adds nothing, mobile or not.
                         if (glm::dot(n, light.centre - x) < -light.boundRadius) continue;
-                        const bool before = distanceToSegment(m.before, x, light.centre) <
-                                            m.radiusBefore + light.boundRadius;
-                        const bool after = distanceToSegment(m.after, x, light.centre) <
-                                           m.radiusAfter + light.boundRadius;
-                        if (before || after) {
-                            key[p] = std::min(
-                                {key[p], glm::length(m.after - x), glm::length(m.before - x)});
-                            break;
+                        const float reach = light.boundRadius + mRaySlack;
+                        if (distanceToSegment(m.before, x, light.centre) < m.radiusBefore + reach ||
+                            distanceToSegment(m.after, x, light.centre) < m.radiusAfter + reach) {
+                            between = true;
+                            if (mSampleWords > 0) mLightStale[std::size_t(p) * lights + l] = 1;
                         }
                     }
+                    if (between)
+                        key[p] =
+                            std::min({key[p], glm::length(m.after - x), glm::length(m.before - x)});
+                }
             }
         });
     for (const std::uint32_t p : mCandidates)
@@ -342,7 +395,8 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
         };
         std::partial_sort(mQueue.begin(), mQueue.begin() + std::ptrdiff_t(take), mQueue.end(),
                           nearer);
-        shadePoints(*scene, *cache, std::span<const std::uint32_t>(mQueue).first(take));
+        shadePoints(*scene, *cache, std::span<const std::uint32_t>(mQueue).first(take),
+                    /*everyLight=*/false);
         for (std::size_t k = 0; k < take; ++k)
             mQueuedFlag[mQueue[k]] = 0;
         mQueue.erase(mQueue.begin(), mQueue.begin() + std::ptrdiff_t(take));

@@ -43,8 +43,11 @@ struct PhotonSegments;
  *     point from which the mobile's bounding sphere (at the old or the new pose) comes within
  *     a light's bounding radius of the segment to that light's centre (lights wholly below
  *     the point's horizon skipped) is queued, keyed by its distance to the mobile; then at
- *     most updateBudget queued points, nearest first (ties by index), are re-shaded with
- *     shadow rays; the rest wait for the next frames.
+ *     most updateBudget queued points, nearest first (ties by index), are re-shaded; the
+ *     rest wait for the next frames. A re-shaded point casts shadow rays only towards the
+ *     lights that test passed for (marked stale since it was last shaded); its other lights
+ *     are replayed from the samples it recorded, which no moved mobile can have blocked or
+ *     unblocked, so the result is bit for bit a full re-shade.
  *  Shading uses random numbers keyed by the point, never by the frame: identical frames give
  *  bit-identical values, and a point that is not refreshed keeps its value exactly.
  *
@@ -54,6 +57,11 @@ struct PhotonSegments;
  *  Writes: ctx<PointCache> (emplaced by build(); shading arrays each frame), the cache file */
 class PointCacheSystem {
 public:
+    /// Most shadow samples per light whose outcomes each point keeps (one bit each), so that
+    /// a refresh re-traces only the lights a moved mobile may shadow; with more samples every
+    /// light of a refreshed point is traced again.
+    static constexpr std::uint32_t kMaxRecordedSamples = 64;
+
     struct FrameStats {
         bool fullIndirect = false;       ///< every point's indirect re-estimated
         std::size_t deltaSegments = 0;   ///< delta segments traced against the point discs
@@ -61,6 +69,8 @@ public:
         std::size_t shadowCandidates = 0; ///< points tested against the moved mobiles
         std::size_t queued = 0;          ///< points newly queued for soft-shadow refresh
         std::size_t refreshed = 0;       ///< points re-shaded this frame (<= updateBudget)
+        std::size_t lightsTraced = 0;    ///< of their (point, light) pairs: cast shadow rays
+        std::size_t lightsReplayed = 0;  ///< ... and replayed from the recorded samples
         std::size_t pending = 0;         ///< queued points left for later frames
         // Wall-clock milliseconds of the stages (also nested under point.cache in the profile).
         double indirectMs = 0; ///< the photon delta through the points' discs
@@ -87,8 +97,10 @@ public:
     const std::vector<AreaLight>& areaLights() const { return mLights; }
 
 private:
+    /// Shades `points`: every light with shadow rays when `everyLight`, else only the lights
+    /// marked stale (and every light of a point with nothing recorded), the others replayed.
     void shadePoints(const RayScene& scene, PointCache& cache,
-                     std::span<const std::uint32_t> points);
+                     std::span<const std::uint32_t> points, bool everyLight);
     void estimateIndirect(PointCache& cache, const PhotonSegments& segments,
                           std::span<const std::uint32_t> indices, double sign);
     void queueShadowed(const Registry& registry, const PointCache& cache);
@@ -117,6 +129,14 @@ private:
     std::vector<std::uint8_t> mCandidateFlag; ///< per point, all 0 between frames
     std::vector<float> mQueueKey;          ///< per point: distance to the mobile when queued
     std::vector<std::uint32_t> mQueue;
+
+    // Recorded shadow samples (kept when shadowSamples <= kMaxRecordedSamples): a refreshed
+    // point casts rays only towards the lights a moved mobile may have come between.
+    std::uint32_t mSampleWords = 0;        ///< 32-bit words per (point, light); 0: nothing recorded
+    std::vector<std::uint32_t> mReached;   ///< per (point, light): the samples that got through
+    std::vector<std::uint8_t> mRecorded;   ///< per point: mReached holds its samples
+    std::vector<std::uint8_t> mLightStale; ///< per (point, light): a move may have changed it
+    float mRaySlack = 0.f; ///< how far a shadow ray's ends lie from the point and the light, m
 
     std::vector<std::uint32_t> mSegments;
     std::vector<std::uint32_t> mIndirect; ///< scratch: the segments estimateIndirect counts

@@ -1,6 +1,7 @@
 #include "systems/point_cache/PointShading.h"
 
 #include "components/StaticMesh.h"
+#include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
@@ -56,9 +57,14 @@ std::vector<AreaLight> findAreaLights(const Registry& registry, const Aabb& scen
     return lights;
 }
 
-LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
-                           const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
-                           std::uint64_t seed, std::uint32_t key) {
+namespace {
+
+/// The estimate of shadeAreaLight with each sample's shadow ray answered by
+/// reaches(sample, ray): true where the ray gets to the light.
+template <typename Reaches>
+LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
+                               const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
+                               std::uint32_t key, Reaches&& reaches) {
     const std::uint64_t seedKey = photon::mixBits(seed ^ kShadowStream);
     const auto u = [&](std::uint32_t dimension) {
         return photon::hashUniform(seedKey, key, lightIndex, dimension);
@@ -97,12 +103,44 @@ LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::u
         ray.direction = photon::offsetFromSurface(y, tri.normal) - origin;
         ray.tnear = 0.f;
         ray.tfar = 1.f - 1e-4f;
-        if (!scene.occluded(ray)) visible += f;
+        if (reaches(s, ray)) visible += f;
     }
     LightSample out;
     out.irradiance = light.radiance * float(double(light.area) * visible / double(samples));
     out.visibility = total > 0.0 ? float(visible / total) : 1.f;
     return out;
+}
+
+} // namespace
+
+LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
+                           const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
+                           std::uint64_t seed, std::uint32_t key) {
+    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key,
+                              [&](std::uint32_t, const Ray& ray) { return !scene.occluded(ray); });
+}
+
+LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
+                           const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
+                           std::uint64_t seed, std::uint32_t key,
+                           std::span<std::uint32_t> reached) {
+    QGI_ASSERT(reached.size() * 32 >= samples);
+    std::fill(reached.begin(), reached.end(), 0u);
+    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key,
+                              [&](std::uint32_t s, const Ray& ray) {
+                                  if (scene.occluded(ray)) return false;
+                                  reached[s / 32] |= 1u << (s % 32);
+                                  return true;
+                              });
+}
+
+LightSample replayAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
+                            const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
+                            std::uint32_t key, std::span<const std::uint32_t> reached) {
+    QGI_ASSERT(reached.size() * 32 >= samples);
+    return integrateAreaLight(
+        light, lightIndex, x, n, samples, seed, key,
+        [&](std::uint32_t s, const Ray&) { return ((reached[s / 32] >> (s % 32)) & 1u) != 0; });
 }
 
 float ambientOcclusion(const RayScene& scene, const glm::vec3& x, const glm::vec3& n,

@@ -6,6 +6,7 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 namespace qgi {
@@ -44,6 +45,19 @@ struct LightSample {
 LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
                            const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
                            std::uint64_t seed, std::uint32_t key);
+
+/// shadeAreaLight that also records which samples reached the light: bit s % 32 of
+/// reached[s / 32] is set where sample s's shadow ray got through (cleared where it was
+/// blocked or the sample faced away). `reached` holds at least `samples` bits.
+LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
+                           const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
+                           std::uint64_t seed, std::uint32_t key, std::span<std::uint32_t> reached);
+
+/// shadeAreaLight again from the samples it recorded, with no ray cast: bit for bit the value
+/// the recording call returned, for as long as nothing that could block those rays moved.
+LightSample replayAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
+                            const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
+                            std::uint32_t key, std::span<const std::uint32_t> reached);
 
 /** Ambient occlusion at x (unit normal n): the fraction of `rays` cosine-weighted directions
  *  that meet static geometry within `distance` metres. A pure function of its arguments

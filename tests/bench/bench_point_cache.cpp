@@ -7,7 +7,8 @@
 //  - Coverage: the share of the shaded surfaces' area no point reaches, by uniform samples;
 //  - UpdateMovingMobile: the `point.cache` frame while the crate in the court moves 5 cm per
 //    frame (the photon update runs untimed before it), at the default budget; counters: delta
-//    segments, points queued and refreshed.
+//    segments, points queued and refreshed, and of the refreshed points' (point, light)
+//    pairs those traced with shadow rays and those replayed from their recorded samples.
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
@@ -188,7 +189,7 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
         w.registry.clearChanges();
     }
     double segments = 0, queued = 0, refreshed = 0, candidates = 0, indirectMs = 0, queueMs = 0,
-           refreshMs = 0;
+           refreshMs = 0, traced = 0, replayed = 0;
     for (auto _ : state) {
         state.PauseTiming();
         const float x = 0.05f * float(w.frame % 40 < 20 ? w.frame % 20 : 20 - w.frame % 20);
@@ -204,6 +205,8 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
         segments += double(s.deltaSegments);
         queued += double(s.queued);
         refreshed += double(s.refreshed);
+        traced += double(s.lightsTraced);
+        replayed += double(s.lightsReplayed);
         candidates += double(s.shadowCandidates);
         indirectMs += s.indirectMs;
         queueMs += s.queueMs;
@@ -214,6 +217,8 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
     state.counters["deltaSegments"] = segments / n;
     state.counters["queued"] = queued / n;
     state.counters["refreshed"] = refreshed / n;
+    state.counters["lightsTraced"] = traced / n;
+    state.counters["lightsReplayed"] = replayed / n;
     state.counters["shadowCandidates"] = candidates / n;
     state.counters["indirect_ms"] = indirectMs / n;
     state.counters["queue_ms"] = queueMs / n;

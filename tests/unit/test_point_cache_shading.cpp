@@ -724,6 +724,86 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     EXPECT_EQ(cache.ao, before.ao);
 }
 
+TEST(PointCacheShading, ReplayingTheRecordedSamplesGivesTheTracedValueBitForBit) {
+    // Floor points in and around the blocker's shadow, 16 (stratified) and 5 (not) samples.
+    ShadowScene scene;
+    PointCacheSystem system(shadowPointSettings());
+    system.build(scene.registry);
+    const RayScene& rays = scene.registry.ctx().get<RayScene>();
+    const AreaLight& light = system.areaLights()[0];
+    std::size_t partial = 0;
+    for (const std::uint32_t samples : {16u, 5u})
+        for (int i = 0; i < 40; ++i) {
+            const glm::vec3 x(-1.f + 0.05f * float(i), 0.f, 0.1f);
+            const glm::vec3 n(0.f, 1.f, 0.f);
+            std::uint32_t reached[1] = {0xdeadbeefu}; // cleared by the recording call
+            const LightSample plain = shadeAreaLight(rays, light, 3, x, n, samples, 7, 11);
+            const LightSample traced =
+                shadeAreaLight(rays, light, 3, x, n, samples, 7, 11, reached);
+            const LightSample replayed = replayAreaLight(light, 3, x, n, samples, 7, 11, reached);
+            EXPECT_EQ(std::memcmp(&plain, &traced, sizeof plain), 0) << i;
+            EXPECT_EQ(std::memcmp(&traced, &replayed, sizeof plain), 0) << i;
+            EXPECT_EQ(reached[0] >> samples, 0u) << "bits past the samples";
+            partial += reached[0] != 0 && reached[0] != (1u << samples) - 1u ? 1 : 0;
+        }
+    EXPECT_GT(partial, 10u); // penumbra points, where the bits matter one by one
+}
+
+TEST(PointCacheUpdate, ARefreshTracesOnlyTheLightsAMoveMayShadowAndEqualsAFullReshade) {
+    // Two panels 4 m apart and a mobile blocker low between them, moved every frame for
+    // 12 frames with a budget that leaves points waiting across moves, then drained. A
+    // refreshed point casts rays only towards the lights a move came between; the others are
+    // replayed from its recorded samples. Afterwards every point must hold, bit for bit, what
+    // tracing both lights afresh gives: a light wrongly left unmarked keeps a stale shadow.
+    ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true, /*secondLight=*/true);
+    RayScene& rays = scene.registry.ctx().get<RayScene>();
+    const PointCacheSettings settings = budgetedSettings();
+    PointCacheSystem system(settings);
+    system.build(scene.registry);
+    const PointCache& cache = scene.registry.ctx().get<PointCache>();
+    ASSERT_EQ(system.areaLights().size(), 2u);
+    system.update(scene.registry, FrameContext{});
+    scene.registry.clearChanges();
+
+    std::size_t traced = 0, replayed = 0, waited = 0;
+    std::uint64_t frame = 1;
+    const auto step = [&] {
+        system.update(scene.registry, FrameContext{frame++});
+        scene.registry.clearChanges();
+        const auto& stats = system.lastFrame();
+        EXPECT_EQ(stats.lightsTraced + stats.lightsReplayed, 2 * stats.refreshed);
+        traced += stats.lightsTraced;
+        replayed += stats.lightsReplayed;
+    };
+    for (int move = 0; move < 12; ++move) {
+        const glm::vec3 at(0.3f * float(move) - 0.5f, 0.3f, move % 2 == 0 ? 0.2f : -0.3f);
+        scene.registry.patch<WorldTransform>(scene.blocker).matrix = translation(at);
+        rays.syncMoved(scene.registry);
+        step();
+        waited += system.lastFrame().pending > 0 ? 1 : 0;
+    }
+    while (system.lastFrame().pending > 0 && frame < 400)
+        step();
+    ASSERT_EQ(system.lastFrame().pending, 0u);
+    EXPECT_GT(waited, 6u); // points waited across moves: their marks had to add up
+    EXPECT_GT(traced, 0u);
+    EXPECT_GT(replayed, traced / 4) << "hardly a light was spared its rays";
+
+    std::size_t mismatches = 0;
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        glm::vec3 sum(0.f);
+        for (std::uint32_t l = 0; l < 2; ++l) {
+            const LightSample s =
+                shadeAreaLight(rays, system.areaLights()[l], l, cache.position[p], cache.normal[p],
+                               cache.settings.shadowSamples, cache.settings.seed, cache.dart[p]);
+            sum += s.irradiance;
+            mismatches += s.visibility != cache.visibility[p * 2 + l] ? 1 : 0;
+        }
+        mismatches += std::memcmp(&sum, &cache.direct[p], sizeof sum) != 0 ? 1 : 0;
+    }
+    EXPECT_EQ(mismatches, 0u);
+}
+
 TEST(PointCacheUpdate, ABlockerTakenOutAndPutBackDrainsToFreshShadows) {
     ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
     const PointCacheSettings settings = budgetedSettings();
