@@ -19,6 +19,11 @@ struct PointCacheSample {
     glm::vec3 irradiance() const { return direct + indirect; }
 };
 
+/// Most shadow samples per light whose outcomes each point keeps (one bit each,
+/// PointCache::reached), so that a refresh re-traces only the lights a moved mobile may
+/// shadow; with more samples every light of a refreshed point is traced again.
+inline constexpr std::uint32_t kMaxRecordedShadowSamples = 64;
+
 /** World resource: the precalculated point set and the shading stored in it (seed 003).
  *  Points sit on static surfaces only; each has a unit normal facing the side light reaches,
  *  a spacing radius r_p in [rMin, rMax] and a search radius R_p = searchScale r_p.
@@ -46,6 +51,12 @@ struct PointCache {
     /// Unoccluded-irradiance-weighted visible fraction of light l at point p, in [0, 1]:
     /// visibility[p * lightCount + l] (1 where the light is below the horizon).
     std::vector<float> visibility;
+    /// 32-bit words per (point, light) in `reached`: (shadowSamples + 31) / 32, or 0 where
+    /// shadowSamples is over kMaxRecordedShadowSamples and nothing is recorded.
+    std::uint32_t sampleWords = 0;
+    /// Which shadow samples of light l reached it from point p when last traced: bit s % 32
+    /// of reached[(p * lightCount + l) * sampleWords + s / 32] (replayAreaLight).
+    std::vector<std::uint32_t> reached;
 
     PointGrid grid;
     /// Bumped whenever a shading array changes (the renderer re-uploads on a new value).

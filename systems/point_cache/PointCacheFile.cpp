@@ -128,6 +128,7 @@ void writePointCacheFile(const std::string& path, std::uint64_t key, const Point
     putValue(out, std::uint64_t(0)); // total bytes, patched below
     putValue(out, std::uint64_t(c.size()));
     putValue(out, c.lightCount);
+    putValue(out, c.sampleWords);
     putArray(out, c.position);
     putArray(out, c.normal);
     putArray(out, c.radius);
@@ -135,6 +136,7 @@ void writePointCacheFile(const std::string& path, std::uint64_t key, const Point
     putArray(out, c.ao);
     putArray(out, c.direct);
     putArray(out, c.visibility);
+    putArray(out, c.reached);
     const std::uint64_t total = out.size() + sizeof(std::uint64_t);
     std::memcpy(out.data() + totalAt, &total, sizeof total);
     Fnv1aHasher sum;
@@ -149,7 +151,7 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     if (!file) fail("point cache file '", path, "' cannot be opened");
     std::vector<char> data((std::istreambuf_iterator<char>(file)),
                            std::istreambuf_iterator<char>());
-    if (data.size() < kMagicSize + 36 + sizeof(std::uint64_t))
+    if (data.size() < kMagicSize + 40 + sizeof(std::uint64_t))
         fail("point cache file '", path, "' is truncated (", data.size(), " bytes)");
     if (std::memcmp(data.data(), kMagic, kMagicSize) != 0)
         fail("point cache file '", path, "' is not a point cache file (bad magic)");
@@ -177,7 +179,11 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
 
     const auto points = in.value<std::uint64_t>();
     const auto lights = in.value<std::uint32_t>();
-    const std::uint64_t perPoint = 4 * (3 + 3 + 1 + 1 + 1 + 3) + 4ull * lights;
+    const auto words = in.value<std::uint32_t>();
+    if (words > (kMaxRecordedShadowSamples + 31) / 32)
+        fail("point cache file '", path, "' records ", words,
+             " words of shadow samples per light, more than are ever written");
+    const std::uint64_t perPoint = 4 * (3 + 3 + 1 + 1 + 1 + 3) + 4ull * lights * (1 + words);
     if (points > in.remaining() / perPoint || points * perPoint != in.remaining())
         fail("point cache file '", path, "' has a size that does not match its ", points,
              " points and ", lights, " lights");
@@ -189,6 +195,7 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     in.array(read.ao, points);
     in.array(read.direct, points);
     in.array(read.visibility, points * lights);
+    in.array(read.reached, points * lights * words);
     for (std::size_t p = 0; p < points; ++p) {
         const float nl = glm::length(read.normal[p]);
         if (!isFinite(read.position[p]) || !isFinite(read.direct[p]) ||
@@ -208,6 +215,8 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     cache.direct = std::move(read.direct);
     cache.visibility = std::move(read.visibility);
     cache.lightCount = lights;
+    cache.sampleWords = words;
+    cache.reached = std::move(read.reached);
 }
 
 } // namespace qgi

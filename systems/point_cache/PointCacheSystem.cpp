@@ -30,6 +30,10 @@ namespace {
 // queueShadowed culls the grid's cells in blocks of this many per axis before testing cells.
 constexpr int kCullBlock = 8;
 
+std::uint32_t recordedWords(std::uint32_t shadowSamples) {
+    return shadowSamples <= kMaxRecordedShadowSamples ? (shadowSamples + 31) / 32 : 0;
+}
+
 float maxScale(const glm::mat4& m) {
     return std::max(
         {glm::length(glm::vec3(m[0])), glm::length(glm::vec3(m[1])), glm::length(glm::vec3(m[2]))});
@@ -66,6 +70,10 @@ void PointCacheSystem::build(Registry& registry) {
             if (cache.lightCount != mLights.size())
                 fail("point cache file '", s.cacheFile, "' holds ", cache.lightCount,
                      " lights, the scene has ", mLights.size(), " (stale)");
+            if (cache.sampleWords != recordedWords(s.shadowSamples))
+                fail("point cache file '", s.cacheFile, "' records ", cache.sampleWords,
+                     " words of samples per light, this build ", recordedWords(s.shadowSamples),
+                     " (stale)");
             mLoaded = true;
             logInfo("point cache: loaded ", cache.size(), " points from '", s.cacheFile, "'");
         } catch (const Error& error) {
@@ -78,14 +86,10 @@ void PointCacheSystem::build(Registry& registry) {
         cache.lightCount = std::uint32_t(mLights.size());
         cache.direct.assign(cache.size(), glm::vec3(0.f));
         cache.visibility.assign(cache.size() * mLights.size(), 1.f);
+        cache.sampleWords = recordedWords(s.shadowSamples);
+        cache.reached.assign(cache.visibility.size() * cache.sampleWords, 0u);
     }
-    // Shadow samples recorded per (point, light) (none after a load: a loaded point traces
-    // every light the first time it is refreshed).
-    const std::size_t pairs = cache.size() * mLights.size();
-    mSampleWords = s.shadowSamples <= kMaxRecordedSamples ? (s.shadowSamples + 31) / 32 : 0;
-    mReached.assign(mSampleWords > 0 ? pairs * mSampleWords : 0, 0u);
-    mRecorded.assign(cache.size(), 0);
-    mLightStale.assign(mSampleWords > 0 ? pairs : 0, 0);
+    mLightStale.assign(cache.sampleWords > 0 ? cache.size() * mLights.size() : 0, 0);
     // A shadow ray runs between points offset from the surface and from the light by
     // photon::offsetFromSurface: at most 1e-4 of the largest coordinate (or 1e-4 m).
     float magnitude = 1.f;
@@ -146,20 +150,20 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
             std::size_t tracedHere = 0, replayedHere = 0;
             for (std::size_t k = range.begin(); k != range.end(); ++k) {
                 const std::uint32_t p = points[k];
-                const bool all = everyLight || !mRecorded[p];
+                const bool all = everyLight;
                 const glm::vec3 x = cache.position[p], n = cache.normal[p];
                 glm::vec3 sum(0.f);
                 for (std::size_t l = 0; l < lights; ++l) {
                     const std::size_t pl = std::size_t(p) * lights + l;
                     const auto light = std::uint32_t(l);
                     LightSample ls;
-                    if (mSampleWords == 0) {
+                    if (cache.sampleWords == 0) {
                         ls = shadeAreaLight(scene, mLights[l], light, x, n, s.shadowSamples, s.seed,
                                             cache.dart[p]);
                         ++tracedHere;
                     } else {
-                        const std::span<std::uint32_t> reached(&mReached[pl * mSampleWords],
-                                                               mSampleWords);
+                        const std::span<std::uint32_t> reached(
+                            &cache.reached[pl * cache.sampleWords], cache.sampleWords);
                         if (all || mLightStale[pl]) {
                             ls = shadeAreaLight(scene, mLights[l], light, x, n, s.shadowSamples,
                                                 s.seed, cache.dart[p], reached);
@@ -175,7 +179,6 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
                     cache.visibility[pl] = ls.visibility;
                 }
                 cache.direct[p] = sum;
-                if (mSampleWords > 0) mRecorded[p] = 1;
             }
             traced += tracedHere;
             replayed += replayedHere;
@@ -233,18 +236,30 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
     };
     forEachMovedOrSwitched(registry, follow);
     if (moves.empty() || cache.size() == 0) return;
-    // Whether a segment from some x within h of q to a light passes a moved mobile (old or new
-    // pose): moving an end of a segment by h moves each of its points by at most h, so
-    // distanceToSegment(c, q, L) < R + h bounds every such x. h = 0: the point test itself.
-    // mRaySlack widens each test by how far a shadow ray's ends lie from x and the light.
+    // Whether a shadow ray from x to a light may pass a moved mobile (old or new pose): the
+    // rays from x to points within the light's bounding radius b of its centre L lie in the
+    // cone distanceBeyondCone(c, x, L, b) measures, which a ball (c, R) can meet only where
+    // that is below R. A ray's ends lie up to mRaySlack off x and the light's points, which
+    // moves each of its points by as much; an apex moved by h (any x within h of a cell's
+    // centre q) moves each point of the cone by at most h. h = 0: the point test itself.
+    // The cone lies inside the capsule of radius b around the segment from x to L, so a
+    // ball clear of the capsule (with mRaySlack more for the float test's rounding) is clear
+    // of the cone: most pairs are settled by that cheaper test.
+    const auto passes = [&](const glm::vec3& c, float R, const glm::vec3& q, const AreaLight& light,
+                            float h) {
+        if (distanceToSegment(c, q, light.centre) >= R + light.boundRadius + 2.f * mRaySlack + h)
+            return false;
+        return distanceBeyondCone(c, q, light.centre, light.boundRadius) <
+               double(R + mRaySlack + h);
+    };
+    const auto between = [&](const Move& m, const glm::vec3& q, const AreaLight& light, float h) {
+        return passes(m.before, m.radiusBefore, q, light, h) ||
+               passes(m.after, m.radiusAfter, q, light, h);
+    };
     const auto mayShadow = [&](const glm::vec3& q, float h) {
         for (const Move& m : moves)
-            for (const AreaLight& light : mLights) {
-                const float reach = light.boundRadius + mRaySlack + h;
-                if (distanceToSegment(m.before, q, light.centre) < m.radiusBefore + reach ||
-                    distanceToSegment(m.after, q, light.centre) < m.radiusAfter + reach)
-                    return true;
-            }
+            for (const AreaLight& light : mLights)
+                if (between(m, q, light, h)) return true;
         return false;
     };
     // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
@@ -295,19 +310,17 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
                 const std::uint32_t p = mCandidates[i];
                 const glm::vec3 x = cache.position[p], n = cache.normal[p];
                 for (const Move& m : moves) {
-                    bool between = false;
+                    bool near = false;
                     for (std::size_t l = 0; l < lights; ++l) {
                         const AreaLight& light = mLights[l];
                         // A light wholly below the point's horizon adds nothing, mobile or not.
                         if (glm::dot(n, light.centre - x) < -light.boundRadius) continue;
-                        const float reach = light.boundRadius + mRaySlack;
-                        if (distanceToSegment(m.before, x, light.centre) < m.radiusBefore + reach ||
-                            distanceToSegment(m.after, x, light.centre) < m.radiusAfter + reach) {
-                            between = true;
-                            if (mSampleWords > 0) mLightStale[std::size_t(p) * lights + l] = 1;
+                        if (between(m, x, light, 0.f)) {
+                            near = true;
+                            if (cache.sampleWords > 0) mLightStale[std::size_t(p) * lights + l] = 1;
                         }
                     }
-                    if (between)
+                    if (near)
                         key[p] =
                             std::min({key[p], glm::length(m.after - x), glm::length(m.before - x)});
                 }

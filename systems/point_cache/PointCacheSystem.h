@@ -40,14 +40,14 @@ struct PhotonSegments;
  *     (DETP is additive per segment): exact, cheap, and a point no delta segment crosses is
  *     not written;
  *   - soft shadows: for each mobile whose WorldTransform or MobileMesh::active changed, every
- *     point from which the mobile's bounding sphere (at the old or the new pose) comes within
- *     a light's bounding radius of the segment to that light's centre (lights wholly below
- *     the point's horizon skipped) is queued, keyed by its distance to the mobile; then at
+ *     point from which the mobile's bounding sphere (at the old or the new pose) may meet the
+ *     cone of shadow rays to a light's bounding sphere (distanceBeyondCone; lights wholly
+ *     below the point's horizon skipped) is queued, keyed by its distance to the mobile; then at
  *     most updateBudget queued points, nearest first (ties by index), are re-shaded; the
  *     rest wait for the next frames. A re-shaded point casts shadow rays only towards the
  *     lights that test passed for (marked stale since it was last shaded); its other lights
- *     are replayed from the samples it recorded, which no moved mobile can have blocked or
- *     unblocked, so the result is bit for bit a full re-shade.
+ *     are replayed from the samples it recorded (PointCache::reached), which no moved mobile
+ *     can have blocked or unblocked, so the result is bit for bit a full re-shade.
  *  Shading uses random numbers keyed by the point, never by the frame: identical frames give
  *  bit-identical values, and a point that is not refreshed keeps its value exactly.
  *
@@ -57,11 +57,6 @@ struct PhotonSegments;
  *  Writes: ctx<PointCache> (emplaced by build(); shading arrays each frame), the cache file */
 class PointCacheSystem {
 public:
-    /// Most shadow samples per light whose outcomes each point keeps (one bit each), so that
-    /// a refresh re-traces only the lights a moved mobile may shadow; with more samples every
-    /// light of a refreshed point is traced again.
-    static constexpr std::uint32_t kMaxRecordedSamples = 64;
-
     struct FrameStats {
         bool fullIndirect = false;       ///< every point's indirect re-estimated
         std::size_t deltaSegments = 0;   ///< delta segments traced against the point discs
@@ -97,8 +92,8 @@ public:
     const std::vector<AreaLight>& areaLights() const { return mLights; }
 
 private:
-    /// Shades `points`: every light with shadow rays when `everyLight`, else only the lights
-    /// marked stale (and every light of a point with nothing recorded), the others replayed.
+    /// Shades `points`: every light with shadow rays when `everyLight` or nothing is recorded
+    /// (PointCache::sampleWords 0), else only the lights marked stale, the others replayed.
     void shadePoints(const RayScene& scene, PointCache& cache,
                      std::span<const std::uint32_t> points, bool everyLight);
     void estimateIndirect(PointCache& cache, const PhotonSegments& segments,
@@ -130,11 +125,8 @@ private:
     std::vector<float> mQueueKey;          ///< per point: distance to the mobile when queued
     std::vector<std::uint32_t> mQueue;
 
-    // Recorded shadow samples (kept when shadowSamples <= kMaxRecordedSamples): a refreshed
-    // point casts rays only towards the lights a moved mobile may have come between.
-    std::uint32_t mSampleWords = 0;        ///< 32-bit words per (point, light); 0: nothing recorded
-    std::vector<std::uint32_t> mReached;   ///< per (point, light): the samples that got through
-    std::vector<std::uint8_t> mRecorded;   ///< per point: mReached holds its samples
+    // With the samples recorded (PointCache::reached), a refreshed point casts rays only
+    // towards the lights a moved mobile may have come between.
     std::vector<std::uint8_t> mLightStale; ///< per (point, light): a move may have changed it
     float mRaySlack = 0.f; ///< how far a shadow ray's ends lie from the point and the light, m
 

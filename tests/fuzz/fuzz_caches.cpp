@@ -22,6 +22,7 @@ namespace {
 void writeSeed(const char* path) {
     qgi::PointCache cache;
     cache.lightCount = 2;
+    cache.sampleWords = 1;
     for (int p = 0; p < 3; ++p) {
         cache.position.emplace_back(float(p), 0.f, 0.f);
         cache.normal.emplace_back(0.f, 1.f, 0.f);
@@ -30,6 +31,7 @@ void writeSeed(const char* path) {
         cache.ao.push_back(0.5f);
         cache.direct.emplace_back(1.f, 2.f, 3.f);
         cache.visibility.insert(cache.visibility.end(), {1.f, 0.25f});
+        cache.reached.insert(cache.reached.end(), {0xffffu, 0x00f0u});
     }
     qgi::writePointCacheFile(path, 42, cache);
 }
@@ -56,7 +58,8 @@ void load(const std::filesystem::path& path, std::uint64_t key) {
     const std::size_t n = cache.position.size();
     if (cache.normal.size() != n || cache.radius.size() != n || cache.dart.size() != n ||
         cache.ao.size() != n || cache.direct.size() != n ||
-        cache.visibility.size() != n * cache.lightCount) {
+        cache.visibility.size() != n * cache.lightCount ||
+        cache.reached.size() != n * cache.lightCount * cache.sampleWords) {
         std::fprintf(stderr, "readPointCacheFile returned arrays of different sizes\n");
         std::abort();
     }

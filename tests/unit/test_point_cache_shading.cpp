@@ -7,6 +7,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Distance.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
 #include "systems/frame/FrameSchedule.h"
@@ -507,6 +508,13 @@ TEST(PointCacheFile, RoundTripsAndIsLoadedOnTheNextStart) {
     EXPECT_TRUE(same(loaded.direct, built.direct));
     EXPECT_TRUE(same(loaded.visibility, built.visibility));
     EXPECT_TRUE(same(loaded.dart, built.dart));
+    // The recorded shadow samples too (one word per point and light at 16 samples), so a
+    // loaded cache's refreshes replay the lights a move cannot shadow.
+    EXPECT_EQ(loaded.sampleWords, 1u);
+    EXPECT_EQ(loaded.reached.size(), built.size() * built.lightCount);
+    EXPECT_TRUE(same(loaded.reached, built.reached));
+    EXPECT_TRUE(std::any_of(loaded.reached.begin(), loaded.reached.end(),
+                            [](std::uint32_t w) { return w != 0; }));
     std::filesystem::remove_all(std::filesystem::path(file).parent_path());
 }
 
@@ -632,8 +640,9 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
     scene.registry.clearChanges();
     const auto stats = system.lastFrame();
     // The queue is exactly what testing every point would give (the system culls by blocks and
-    // cells of its grid first): the points with a light above their horizon whose segment to
-    // it passes within (blocker's bounding sphere + light's) of the blocker, old or new pose.
+    // cells of its grid first): the points with a light above their horizon whose cone of
+    // rays to the light's bounding sphere (distanceBeyondCone) comes within the blocker's
+    // bounding sphere, old or new pose.
     {
         Aabb box;
         for (const glm::vec3& v : scene.registry.get<Mesh>(scene.blocker).positions)
@@ -647,11 +656,9 @@ TEST(PointCacheUpdate, BudgetIsRespectedFarPointsStayAndTheQueueDrainsToFreshVal
             bool hit = false;
             for (const AreaLight& l : system.areaLights()) {
                 if (glm::dot(cache.normal[p], l.centre - x) < -l.boundRadius) continue;
-                for (const glm::vec3 at : {blockerOld, blockerOld + offset}) {
-                    const glm::vec3 c = at + box.center(), ab = l.centre - x;
-                    const float t = std::clamp(glm::dot(c - x, ab) / glm::dot(ab, ab), 0.f, 1.f);
-                    hit = hit || glm::length(x + t * ab - c) < radius + l.boundRadius;
-                }
+                for (const glm::vec3 at : {blockerOld, blockerOld + offset})
+                    hit = hit || distanceBeyondCone(at + box.center(), x, l.centre, l.boundRadius) <
+                                     double(radius);
             }
             expected += hit ? 1 : 0;
             if (hit) queued.push_back(std::uint32_t(p));
