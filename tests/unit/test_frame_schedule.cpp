@@ -201,8 +201,9 @@ TEST(FrameSchedule, APooledMobileTakenOutAndPutBackIsFollowedWithoutANewSchedule
         }
     EXPECT_GT(under.size(), 2u);
 
-    // Back in: the shadow is back, to the rounding of the incremental sums (a shadow left
-    // out would differ by the whole contrast).
+    // Back in: the shadow is back. A shadow left out would differ by the whole contrast, so a
+    // thousandth of it tells the two apart (that the incremental sums equal a full estimate
+    // to their rounding is test_photon_update's and test_detp's).
     room.registry.patch<MobileMesh>(room.table).active = true;
     runFrames(frame, room.registry, 1);
     EXPECT_FALSE(tableDark());

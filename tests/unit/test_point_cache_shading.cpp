@@ -364,7 +364,8 @@ TEST(PointCacheShading, StoredPointShadowsMatchTheReference) {
         // The stored visible fraction (weighted by the unoccluded irradiance of each sample)
         // estimates exact / open the same way. As a ratio of two sums it carries a bias of
         // order 1 / shadowSamples of its spread, far inside the bound.
-        EXPECT_NEAR(cache.visibility[p], exact / open, kT63Of1e6 * s.visibilitySd + 1e-5)
+        // Rounding: a ratio of sums each within kRounding of their own scale, and a float.
+        EXPECT_NEAR(cache.visibility[p], exact / open, kT63Of1e6 * s.visibilitySd + kRounding)
             << p << " at " << x.x << ", " << x.z;
         difference += stored - exact;
         variance += s.sd * s.sd;
@@ -424,7 +425,7 @@ TEST(PointCacheShading, TwoLightsAddUpAndKeepTheirOwnVisibility) {
                         kRounding * (nearOpen + farExact))
             << p << " at " << x.x << ", " << x.z;
         EXPECT_NEAR(cache.visibility[p * 2 + near], nearExact / nearOpen,
-                    kT63Of1e6 * a.visibilitySd + 1e-5)
+                    kT63Of1e6 * a.visibilitySd + kRounding)
             << p;
         EXPECT_EQ(cache.visibility[p * 2 + far], 1.f) << p;
         ++checked;

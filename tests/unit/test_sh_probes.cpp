@@ -1001,7 +1001,14 @@ TEST(ShProbes, InterpolationReproducesLinearFieldsAndRenormalisesOverEnabledProb
                 std::uint32_t(corner.x + grid.counts.x * (corner.y + grid.counts.y * corner.z)));
             const double w =
                 (c & 1 ? t.x : 1.0 - t.x) * (c & 2 ? t.y : 1.0 - t.y) * (c & 4 ? t.z : 1.0 - t.z);
-            EXPECT_NEAR(blend.weights[c], w, 1e-5) << "corner " << c;
+            // The system's t is (x - origin) / spacing in float, two roundings of terms up to
+            // (|x| + |origin|) / spacing; each weight is a product of three factors within
+            // that of the exact ones, rounded twice more, then normalised (two more).
+            const double reach = (std::max({std::abs(x.x), std::abs(x.y), std::abs(x.z)}) +
+                                  std::max({std::abs(grid.origin.x), std::abs(grid.origin.y),
+                                            std::abs(grid.origin.z)})) /
+                                 double(grid.spacing);
+            EXPECT_NEAR(blend.weights[c], w, 3.0 * reach * 2.0 * kU + 4.0 * kU) << "corner " << c;
         }
     }
 
