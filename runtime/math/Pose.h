@@ -5,6 +5,7 @@
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/matrix.hpp>
+#include <glm/vec3.hpp>
 
 #include <cmath>
 
@@ -23,6 +24,15 @@ inline bool isUsablePose(const glm::mat4& m) {
             if (!std::isfinite(m[c][r]) || std::abs(m[c][r]) > kMaxPoseReach) return false;
     const float det = glm::determinant(glm::mat3(m));
     return std::isfinite(det) && det != 0.f;
+}
+
+/// Where a point or spot light may shine from: finite and within kMaxPoseReach of the origin
+/// on every axis, as a mesh's pose. Rays towards a light much farther (Embree asserts past
+/// about 1.8e18 m) are meaningless; every system leaves such a light dark.
+inline bool isUsableLightPosition(const glm::vec3& p) {
+    for (int a = 0; a < 3; ++a)
+        if (!std::isfinite(p[a]) || std::abs(p[a]) > kMaxPoseReach) return false;
+    return true;
 }
 
 } // namespace qgi

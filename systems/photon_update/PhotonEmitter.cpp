@@ -11,6 +11,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Log.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Pose.h"
 #include "runtime/scene/SceneQueries.h"
 
 #include <glm/gtc/constants.hpp>
@@ -173,6 +174,9 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
                        emitter.kind == EmitterKind::Surface ? "emission" : "colour x intensity",
                        "is negative or not finite");
     emitter.position = glm::vec3(emitter.world[3]);
+    if ((emitter.kind == EmitterKind::Point || emitter.kind == EmitterKind::Spot) &&
+        !isUsableLightPosition(emitter.position))
+        return disable(emitter, "WorldTransform.matrix", "places it more than 1e7 m away");
     emitter.directDrawn = emitter.kind != EmitterKind::Surface; // prepareSurface decides
     switch (emitter.kind) {
     case EmitterKind::Point:

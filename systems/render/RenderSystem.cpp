@@ -16,6 +16,7 @@
 #include "runtime/core/Log.h"
 #include "runtime/io/Exr.h"
 #include "runtime/io/Png.h"
+#include "runtime/math/Pose.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/render/GpuTexture.h"
 #include "runtime/scene/SceneQueries.h"
@@ -284,6 +285,7 @@ void RenderSystem::collectLights(const Registry& registry) {
     mLights.clear();
     registry.view<const PointLight, const WorldTransform>().each(
         [&](const PointLight& light, const WorldTransform& world) {
+            if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Point;
             out.position = glm::vec3(world.matrix[3]);
@@ -291,6 +293,7 @@ void RenderSystem::collectLights(const Registry& registry) {
         });
     registry.view<const SpotLight, const WorldTransform>().each(
         [&](const SpotLight& light, const WorldTransform& world) {
+            if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Spot;
             out.position = glm::vec3(world.matrix[3]);

@@ -15,6 +15,7 @@
 #include "runtime/core/Finite.h"
 #include "runtime/core/Hash.h"
 #include "runtime/core/Log.h"
+#include "runtime/math/Pose.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneQueries.h"
@@ -207,10 +208,12 @@ void ShProbeSystem::snapshotLights(const Registry& registry) {
             out.radiance = light.color * light.irradiance;
             out.standIn = registry.has<LightStandIn>(e);
         });
-    // Lights with non-finite data would poison every probe: leave them out.
+    // Lights with non-finite data would poison every probe, and one past kMaxPoseReach is
+    // dark everywhere (the photons' rule): leave them out.
     std::erase_if(mLights, [](const Light& l) {
-        return !isFinite(l.position) || !isFinite(l.radiance) || !isFinite(l.direction) ||
-               !std::isfinite(l.coneScale) || !std::isfinite(l.coneOffset);
+        return !isUsableLightPosition(l.position) || !isFinite(l.radiance) ||
+               !isFinite(l.direction) || !std::isfinite(l.coneScale) ||
+               !std::isfinite(l.coneOffset);
     });
 }
 

@@ -13,6 +13,7 @@
 #include "runtime/core/Hash.h"
 #include "runtime/ecs/Registry.h"
 #include "runtime/math/Distance.h"
+#include "runtime/math/Pose.h"
 #include "systems/vlf/DirectionSet.h"
 
 #include <glm/geometric.hpp>
@@ -111,7 +112,7 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, Embre
     std::vector<PunctualLight> lights;
     registry.view<const PointLight, const WorldTransform>().each(
         [&](Entity e, const PointLight& p, const WorldTransform& w) {
-            if (registry.has<LightStandIn>(e)) return;
+            if (registry.has<LightStandIn>(e) || !isUsableLightPosition(w.matrix[3])) return;
             PunctualLight l;
             l.position = glm::vec3(w.matrix[3]);
             l.intensity = p.color * p.intensity;
@@ -119,7 +120,7 @@ std::unique_ptr<VlfScene> VlfScene::fromRegistry(const Registry& registry, Embre
         });
     registry.view<const SpotLight, const WorldTransform>().each(
         [&](Entity e, const SpotLight& s, const WorldTransform& w) {
-            if (registry.has<LightStandIn>(e)) return;
+            if (registry.has<LightStandIn>(e) || !isUsableLightPosition(w.matrix[3])) return;
             PunctualLight l;
             l.position = glm::vec3(w.matrix[3]);
             l.intensity = s.color * s.intensity;

@@ -397,6 +397,23 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
     expectDark(bad);
     bad.outerAngle = 2.f;
     expectDark(bad);
+    // Past kMaxPoseReach from the origin (Embree aborts on rays from 1.8e18 m): dark. Just
+    // inside it, a light still shines.
+    for (const EmitterKind kind : {EmitterKind::Point, EmitterKind::Spot}) {
+        PhotonEmitter far;
+        far.kind = kind;
+        far.radiant = glm::vec3(1.f);
+        far.innerAngle = 0.2f;
+        far.outerAngle = 0.4f;
+        far.world = glm::translate(glm::mat4(1.f), glm::vec3(0.f, 0.9e7f, 0.f));
+        PhotonEmitter near = far;
+        prepareEmitter(registry, {glm::vec3(-1.f), glm::vec3(1.f)}, near);
+        EXPECT_GT(near.power.x, 0.f);
+        for (const glm::vec3 at : {glm::vec3(0.f, 2e7f, 0.f), glm::vec3(-1e20f, 0.f, 0.f)}) {
+            far.world = glm::translate(glm::mat4(1.f), at);
+            expectDark(far);
+        }
+    }
     bad.kind = EmitterKind::Directional;
     bad.world = glm::mat4(0.f);
     expectDark(bad);

@@ -695,6 +695,36 @@ void expectEachLightsPowerShot(const PhotonStore& store) {
                 << "light " << l << ", channel " << c;
 }
 
+TEST(PhotonUpdate, ALightMovedPastThePosesReachGoesDarkWithAWarningAndNothingAborts) {
+    // The room's light carried to 1e20 m in play (a runaway animation, say): a photon shot
+    // from there would make Embree abort. It is named, its photons are shot dark within the
+    // budget, and brought back it shines again.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(5'000));
+    firstUpdate(registry, system);
+    const glm::dvec3 lit = impactPower(storeOf(registry));
+    ASSERT_GT(lit.x, 0.0);
+    const ScopedLogLevel verbose(LogLevel::Info);
+    ::testing::internal::CaptureStderr();
+    std::uint64_t frame = 1;
+    registry.patch<WorldTransform>(room.light).matrix = translation({0.f, 1e20f, 0.f});
+    for (int f = 0; f < 20; ++f) {
+        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
+        registry.clearChanges();
+    }
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_NE(log.find("places it more than 1e7 m away"), std::string::npos) << log;
+    EXPECT_EQ(impactPower(storeOf(registry)), glm::dvec3(0.0));
+    registry.patch<WorldTransform>(room.light).matrix = translation({0.f, 1.2f, 0.f});
+    for (int f = 0; f < 20; ++f) {
+        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
+        registry.clearChanges();
+    }
+    EXPECT_NEAR(impactPower(storeOf(registry)).x, lit.x, 1e-4 * lit.x);
+}
+
 /// Parameter: DETP in hybrid mode (the lights' first segments left to the shader: a ghost must
 /// keep its light's flag) or photon mode.
 class HundredMoves : public ::testing::TestWithParam<bool> {};

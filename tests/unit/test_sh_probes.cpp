@@ -631,6 +631,33 @@ TEST(ShProbes, PhotonModeCarriesPointAndSpotLightsAtTheProbe) {
     }
 }
 
+TEST(ShProbes, LightsPastThePosesReachAreLeftDarkAndCastNoRay) {
+    // Photon mode, where the probes hold point and spot lights themselves (the test above). A
+    // point light 2e7 m above the floor, just past kMaxPoseReach, bright enough to give
+    // 100 W/m^2 there, and lights at 1e20 m, where a shadow ray would make Embree abort: the
+    // probes are bit for bit those of the floor alone.
+    FloorScene plain(floorSettings(false), grey(0.5f));
+    plain.run();
+    FloorScene scene(floorSettings(false), grey(0.5f));
+    const auto add = [&](const glm::vec3& at, bool spot, float intensity) {
+        const Entity e = scene.world.create();
+        scene.world.emplace<WorldTransform>(e, glm::translate(glm::mat4(1.f), at));
+        if (spot)
+            scene.world.emplace<SpotLight>(e, SpotLight{glm::vec3(1.f), intensity, 0.1f, 0.5f});
+        else
+            scene.world.emplace<PointLight>(e, PointLight{glm::vec3(1.f), intensity});
+    };
+    add({0.f, 2e7f, 0.f}, false, 4e16f);
+    add({0.f, 1e20f, 0.f}, false, 1.f);
+    add({1e20f, 1.f, 0.f}, true, 1.f);
+    scene.run();
+    const ProbeVolume& a = plain.world.ctx().get<ProbeVolume>();
+    const ProbeVolume& b = scene.world.ctx().get<ProbeVolume>();
+    ASSERT_EQ(a.probeCount(), b.probeCount());
+    for (std::uint32_t p = 0; p < a.probeCount(); ++p)
+        ASSERT_EQ(std::memcmp(&a.coefficients(p), &b.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
+}
+
 TEST(ShProbes, ConstantEnvironmentGivesPiL) {
     // Nothing but sky: every probe's irradiance is pi L for every normal, within a bound that
     // holds for any rotation of the probe's rays (w = 4 pi / n per ray, Y_l the vector of

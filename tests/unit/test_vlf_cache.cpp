@@ -440,6 +440,11 @@ TEST(VlfScene, ReadsPointSpotAndDirectionalLightsButNotStandIns) {
     const Entity bulb = light(glm::translate(glm::mat4(1.f), {0.f, 1.f, 0.f}));
     world.emplace<PointLight>(bulb, PointLight{});
     world.emplace<LightStandIn>(bulb);
+    // Past kMaxPoseReach (runtime/math/Pose.h) a light is dark everywhere, so not read.
+    world.emplace<PointLight>(light(glm::translate(glm::mat4(1.f), {0.f, 1e20f, 0.f})),
+                              PointLight{glm::vec3(1.f), 1.f});
+    world.emplace<SpotLight>(light(glm::translate(glm::mat4(1.f), {2e7f, 1.f, 0.f})),
+                             SpotLight{glm::vec3(1.f), 3.f, 0.2f, 0.4f});
 
     const auto scene = VlfScene::fromRegistry(world);
     ASSERT_EQ(scene->lights().size(), 3u);
