@@ -31,6 +31,7 @@
 #include <limits>
 #include <map>
 #include <numbers>
+#include <set>
 
 namespace qgi {
 
@@ -634,6 +635,7 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
     // the scene (a 20 km line beside a room made the room's edge bound 400 m).
     const double minArea = double(MeshProcessingOptions{}.minTriangleArea);
     Aabb rawBounds;
+    std::set<std::string> needlesNamed; // once per source mesh, not per instance
     for (const EntityRecord& r : scene.records) {
         if (!r.source) continue;
         const Mesh& mesh = r.source->mesh;
@@ -643,13 +645,29 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         const auto corner = [&](std::size_t k) {
             return glm::dvec3(r.world * glm::vec4(mesh.positions[mesh.indices[k]], 1.f));
         };
+        // A needle (area, but a height under a millionth of its longest edge: a vertex far
+        // off, say) is dropped like a degenerate triangle; unlike one it takes area with it.
+        std::size_t needles = 0;
+        double needleArea = 0.0;
         for (std::size_t k = 0; k + 2 < mesh.indices.size(); k += 3) {
             const glm::dvec3 a = corner(k), b = corner(k + 1), c = corner(k + 2);
-            if (!hasArea(a, b, c, minArea)) continue;
+            if (!hasArea(a, b, c, minArea)) {
+                const double area = 0.5 * glm::length(glm::cross(b - a, c - a));
+                if (area >= minArea) {
+                    ++needles;
+                    needleArea += area;
+                }
+                continue;
+            }
             rawBounds.extend(glm::vec3(a));
             rawBounds.extend(glm::vec3(b));
             rawBounds.extend(glm::vec3(c));
         }
+        if (needles > 0 && needlesNamed.insert(r.source->field).second)
+            logWarning(mLabel, ": ", r.source->field, ": ", needles,
+                       " triangle(s) too thin to light (narrower than a millionth of their "
+                       "longest edge; ",
+                       needleArea, " m^2 in all) are dropped");
     }
     if (!rawBounds.empty()) {
         const double size = glm::length(glm::dvec3(rawBounds.extent()));

@@ -169,6 +169,40 @@ TEST(GltfBadInput, AMisspeltExtrasKeyIsNamedWithTheOneMeant) {
     }
 }
 
+TEST(GltfBadInput, ANeedleTriangleIsNamedWhenItIsDropped) {
+    // A floor quad, and a triangle 0.08 m^2 in area with one corner 10,000 km off: a height of
+    // 4 cm over that length is a needle, which processing drops like a degenerate triangle.
+    // Unlike a degenerate one it takes area with it, so a warning names the primitive.
+    const float positions[] = {-1, 0, -1,   1, 0,    -1,   1, 0,    1,    -1,  0,
+                               1,  0, 0.5f, 0, 0.4f, 0.5f, 0, 1e7f, 0.5f, 0.4f};
+    const std::uint32_t indices[] = {0, 2, 1, 0, 3, 2, 4, 5, 6};
+    {
+        std::ofstream bin(scratchFile("needle.bin"), std::ios::binary);
+        bin.write(reinterpret_cast<const char*>(positions), sizeof positions);
+        bin.write(reinterpret_cast<const char*>(indices), sizeof indices);
+    }
+    std::ofstream(scratchFile("needle.gltf")) << R"({"asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": 120, "uri": "needle.bin"}],
+        "bufferViews": [{"buffer": 0, "byteLength": 84},
+                        {"buffer": 0, "byteOffset": 84, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 7, "type": "VEC3",
+                       "min": [-1, 0, -1], "max": [1e7, 0.5, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 9, "type": "SCALAR"}]})";
+    Registry registry;
+    ::testing::internal::CaptureStderr();
+    importGltf(registry, scratchFile("needle.gltf"), kNoRefinement);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_NE(log.find("meshes[0].primitives[0]: 1 triangle(s) too thin to light"),
+              std::string::npos)
+        << log;
+    EXPECT_NE(log.find("0.08 m^2"), std::string::npos) << log;
+    // The floor alone is what loads, and it sets the scene's size.
+    EXPECT_EQ(registry.count<Mesh>(), 1u);
+    EXPECT_NEAR(registry.ctx().get<SceneInfo>().bounds.extent().x, 2.f, 1e-6f);
+}
+
 TEST(GltfBadInput, DeepNestingIsRefusedBeforeParsing) {
     // 10000 nested arrays overflow tinygltf's recursive parser; the importer must not hand
     // them over. The scene sits in the good folder's copy so the external .bin resolves.
