@@ -213,7 +213,9 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
         for (const fs::path& input : inputs)
             if (fs::equivalent(file, input, error))
                 fail(option, ": '", file.string(), "' is an input of this run; not overwritten");
-        if (!fs::is_regular_file(file, error) && !fs::is_directory(file, error))
+        if (fs::is_directory(file, error))
+            fail(option, ": '", file.string(), "' is a folder; not written");
+        if (!fs::is_regular_file(file, error))
             fail(option, ": '", file.string(), "' is not a regular file; not written");
     }
     // A base path (`extended`) names files BASE.ext: a folder of that name is no obstacle.

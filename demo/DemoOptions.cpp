@@ -6,9 +6,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -64,9 +66,13 @@ CLI::Validator finiteNumber() {
     return CLI::Validator(
         [](std::string& value) -> std::string {
             char* end = nullptr;
+            errno = 0;
             const double v = std::strtod(value.c_str(), &end);
             if (value.empty() || end != value.c_str() + value.size() || !std::isfinite(v))
                 return "'" + value + "' is not a finite number";
+            // 1e-400 would read as 0, which means the scene's default to most options.
+            if (errno == ERANGE || (v != 0.0 && float(v) == 0.f))
+                return "'" + value + "' is too small to hold (not 0)";
             return {};
         },
         "");
@@ -92,6 +98,26 @@ template <typename T> CLI::Validator within(T min, T max) {
         help.str());
 }
 
+/// For options that name a file: an empty name is a mistake on the command line.
+CLI::Validator nonEmptyPath() {
+    return CLI::Validator(
+        [](std::string& value) { return value.empty() ? "the path is empty" : std::string{}; }, "");
+}
+
+/// --export-scene: the format comes from the extension, so it must be one qgi writes.
+CLI::Validator gltfExtension() {
+    return CLI::Validator(
+        [](std::string& value) {
+            std::string extension = std::filesystem::path(value).extension().string();
+            for (char& c : extension)
+                c = char(std::tolower(static_cast<unsigned char>(c)));
+            return extension == ".gltf" || extension == ".glb"
+                       ? std::string{}
+                       : "'" + value + "' does not end in .gltf or .glb";
+        },
+        "");
+}
+
 } // namespace
 
 ParseResult parseDemoOptions(int argc, char** argv) {
@@ -108,7 +134,9 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     // An option given twice takes its last value, as in most tools (and wrapper scripts that
     // append to defaults).
     app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
-    app.add_option("--scene", o.scene, "Built-in scene (" + builtinList() + ") or a .gltf/.glb file");
+    app.add_option("--scene", o.scene,
+                   "Built-in scene (" + builtinList() + ") or a .gltf/.glb file")
+        ->check(nonEmptyPath());
     app.add_flag("--headless", o.headless,
                  "Render offscreen (hidden window), follow the scripted camera path with a fixed time step");
     app.add_option("--context", o.context,
@@ -132,7 +160,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         ->check(within(16, 8192));
     app.add_option("--camera-path", o.cameraPath,
                    "'scene' (the scene's own path), 'none' (stay at the start), or a CSV file with "
-                   "rows time,x,y,z,yaw_deg,pitch_deg");
+                   "rows time,x,y,z,yaw_deg,pitch_deg")
+        ->check(nonEmptyPath());
     app.add_option("--mode", o.mode, "Lighting mode: photon (all light from photons) or hybrid "
                                      "(direct light from punctual lights in the shader)")
         ->check(CLI::IsMember({"photon", "hybrid"}));
@@ -185,22 +214,27 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--screenshot", o.screenshot,
                    "Base path: writes BASE.exr (linear HDR) and BASE.png (tonemapped) after the "
                    "last frame (shot.png or shot.exr also name the base shot)")
+        ->check(nonEmptyPath())
         ->transform(baseOf({".png", ".exr"}));
     app.add_option("--profile", o.profile,
                    "Base path: writes BASE.json (Chrome trace, opens in Perfetto) and BASE.csv "
                    "(per-frame, per-entry times)")
+        ->check(nonEmptyPath())
         ->transform(baseOf({".json", ".csv"}));
     app.add_option("--export-scene", o.exportScene,
-                   "Writes the loaded scene as glTF (.gltf or .glb) with qgi's conventions");
+                   "Writes the loaded scene as glTF (.gltf or .glb) with qgi's conventions")
+        ->check(nonEmptyPath())
+        ->check(gltfExtension());
     app.add_option(
-        "--export-irradiance", o.exportIrradiance,
-        "Writes per-vertex irradiance after the last frame as binary little-endian PLY: "
-        "x y z nx ny nz, "
-        "er eg eb (W/m^2) and a mobile flag per vertex. In hybrid mode it leaves out "
-        "the direct light the renderer draws (of point, spot and directional lights, "
-        "and of emissive surfaces with a light stand-in); "
-        "--mode photon exports all light. An existing file that is not an earlier export "
-        "is not overwritten");
+           "--export-irradiance", o.exportIrradiance,
+           "Writes per-vertex irradiance after the last frame as binary little-endian PLY: "
+           "x y z nx ny nz, "
+           "er eg eb (W/m^2) and a mobile flag per vertex. In hybrid mode it leaves out "
+           "the direct light the renderer draws (of point, spot and directional lights, "
+           "and of emissive surfaces with a light stand-in); "
+           "--mode photon exports all light. An existing file that is not an earlier export "
+           "is not overwritten")
+        ->check(nonEmptyPath());
     app.add_option("--vlf", o.vlf,
                    "Virtual Light Field for glossy and mirror surfaces: on, off, or auto (on when "
                    "the static scene has 1 to 256 glossy or mirror faces)")
@@ -215,15 +249,18 @@ ParseResult parseDemoOptions(int argc, char** argv) {
         ->check([](const std::string& value) {
             return std::stoi(value) % 8 == 0 ? std::string{} : value + " is not a multiple of 8";
         });
-    app.add_option("--vlf-cache", o.vlfCache,
-                   "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)");
     app.add_option(
-        "--export-avatars", o.exportAvatars,
-        "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
-        "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
-        "real basis over world x, y, z). In hybrid mode, as the probes shade, it leaves "
-        "out the direct light the renderer draws. An existing file that is not an earlier "
-        "export is not overwritten");
+           "--vlf-cache", o.vlfCache,
+           "VLF cache file (auto: <scene>.vlf in the working folder; none: bake every start)")
+        ->check(nonEmptyPath());
+    app.add_option(
+           "--export-avatars", o.exportAvatars,
+           "Writes each avatar's SH lighting after the last frame as CSV: avatar,x,y,z, then "
+           "the 27 radiance coefficients L00_r..L22_b (W/(m^2 sr), Ramamoorthi-Hanrahan "
+           "real basis over world x, y, z). In hybrid mode, as the probes shade, it leaves "
+           "out the direct light the renderer draws. An existing file that is not an earlier "
+           "export is not overwritten")
+        ->check(nonEmptyPath());
     app.add_flag("--quiet", o.quiet, "Only warnings and errors");
     app.add_option("--overlay", o.overlay,
                    "Frame-time overlay (F1 hides it): auto (in an interactive window), on (in a "
@@ -235,7 +272,8 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_option("--point-cache-file", o.pointCacheFile,
                    "Point cache file (auto: <scene>.pcache in the working folder; none: bake "
                    "every start): loaded when it matches the scene and settings, else rebaked "
-                   "and written. A file name implies --point-cache");
+                   "and written. A file name implies --point-cache")
+        ->check(nonEmptyPath());
     app.add_flag("--show-points", o.showPoints,
                  "Start with the point-set view on (key P toggles it; implies --point-cache)");
 

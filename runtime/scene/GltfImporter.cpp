@@ -28,10 +28,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <numbers>
 #include <set>
+#include <sstream>
 
 namespace qgi {
 
@@ -671,9 +673,12 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
     }
     if (!rawBounds.empty()) {
         const double size = glm::length(glm::dvec3(rawBounds.extent()));
-        if (!(size <= kSceneMaxSize))
-            fail("", "the scene is ", size, " m across, more than the ", kSceneMaxSize,
+        if (!(size <= kSceneMaxSize)) {
+            std::ostringstream across; // enough digits that a size just past the limit shows it
+            across << std::setprecision(9) << size;
+            fail("", "the scene is ", across.str(), " m across, more than the ", kSceneMaxSize,
                  " m qgi lights (are its units millimetres?)");
+        }
     }
     float maxEdge = mOptions.maxEdgeLength;
     if (maxEdge == 0.f && !rawBounds.empty()) maxEdge = glm::length(rawBounds.extent()) / 50.f;

@@ -283,7 +283,8 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
     for (const char* args :
          {"--frames -3", "--width 0", "--mode sideways", "--no-such-flag", "--photons abc",
           "--width 1280.5", "--seed -1", "--dt nan", "--exposure inf", "--vlf-lines 12",
-          "--context sideways", "--photons 0x10", "--photons 1e1000"}) {
+          "--context sideways", "--photons 0x10", "--photons 1e1000", "--export-scene out.txt",
+          "--screenshot ''", "--point-cache-file ''", "--disc-radius 1e-400"}) {
         const RunResult run = runDemo(std::string(args) + " --headless");
         EXPECT_EQ(run.exitCode, 2) << args << ": " << run.output;
         // One line, naming the option.
@@ -294,6 +295,9 @@ TEST(DemoSmoke, BadOptionsGiveOneLineErrorAndExitCode2) {
     }
     // An overflowing number is called too large, not "not a whole number".
     EXPECT_NE(runDemo("--photons 1e1000 --headless").output.find("'1e1000' is too large"),
+              std::string::npos);
+    // A number too small for a float would read as 0, the scene's default: refused.
+    EXPECT_NE(runDemo("--exposure 1e-46 --headless").output.find("'1e-46' is too small"),
               std::string::npos);
     // A value out of range is told the range as the help writes it.
     EXPECT_NE(runDemo("--disc-radius 500 --headless")
@@ -356,9 +360,10 @@ TEST(DemoSmoke, OutputThatCannotBeWrittenFailsBeforeTheRun) {
     }
 }
 
-TEST(DemoSmoke, AFailedScreenshotStillLeavesTheOtherOutputs) {
-    // shot.png is a folder: the screenshot fails when written, after the checks at start.
-    const fs::path dir = scratchDir() / "late_failure";
+TEST(DemoSmoke, AScreenshotOverAFolderIsRefusedBeforeTheRun) {
+    // shot.png is a folder: refused with the other checks at start, not after the last frame
+    // (when a long run would have been spent for it).
+    const fs::path dir = scratchDir() / "shot_folder";
     fs::remove_all(dir);
     fs::create_directories(dir / "shot.png");
     const RunResult run =
@@ -366,15 +371,21 @@ TEST(DemoSmoke, AFailedScreenshotStillLeavesTheOtherOutputs) {
                 "--photons 1000 --screenshot " +
                 (dir / "shot").string() + " --export-irradiance " + (dir / "light.ply").string());
     EXPECT_EQ(run.exitCode, 1) << run.output;
-    EXPECT_NE(run.output.find("--screenshot"), std::string::npos) << run.output;
-    EXPECT_TRUE(fs::exists(dir / "light.ply")) << run.output;
+    EXPECT_NE(run.output.find("--screenshot: '" + (dir / "shot.png").string() +
+                              "' is a folder; not written"),
+              std::string::npos)
+        << run.output;
+    EXPECT_EQ(run.output.find("ready in"), std::string::npos) << "the scene was loaded first";
+    EXPECT_FALSE(fs::exists(dir / "shot.exr"));
 }
 
 TEST(DemoSmoke, OutputPathsThatNameNoFileAreRefused) {
-    for (const char* args : {"--screenshot ''", "--profile /tmp/", "--export-irradiance /tmp",
-                             "--export-avatars /tmp"}) {
+    // An empty path is a command-line error (2), a folder a problem with the output (1).
+    for (const auto& [args, code] :
+         {std::pair{"--screenshot ''", 2}, std::pair{"--profile /tmp/", 1},
+          std::pair{"--export-irradiance /tmp", 1}, std::pair{"--export-avatars /tmp", 1}}) {
         const RunResult run = runDemo(std::string("--headless --frames 1 ") + args);
-        EXPECT_EQ(run.exitCode, 1) << args << ": " << run.output;
+        EXPECT_EQ(run.exitCode, code) << args << ": " << run.output;
         EXPECT_EQ(run.output.find("ready in"), std::string::npos) << args;
     }
 }
