@@ -14,6 +14,7 @@
 #include <iostream>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace qgi::demo {
@@ -277,6 +278,12 @@ ParseResult parseDemoOptions(int argc, char** argv) {
     app.add_flag("--show-points", o.showPoints,
                  "Start with the point-set view on (key P toggles it; implies --point-cache)");
 
+    // Help wins over the rest of the line: `--help --photons -1` asks for help, not an error.
+    for (int i = 1; i < argc; ++i)
+        if (std::string_view(argv[i]) == "--help" || std::string_view(argv[i]) == "-h") {
+            result.exitCode = app.exit(CLI::CallForHelp());
+            return result;
+        }
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {

@@ -328,10 +328,15 @@ TEST(DemoSmoke, AFileWithNothingToLightIsNamed) {
 }
 
 TEST(DemoSmoke, WholeNumbersMayBeWrittenInScientificForm) {
-    // "--photons 1e6" is a million; the run then stops at --help. An option given twice takes
-    // its last value.
-    EXPECT_EQ(runDemo("--photons 1e6 --frames 1e1 --help").exitCode, 0);
-    EXPECT_EQ(runDemo("--frames 2 --frames 3 --help").exitCode, 0);
+    // "--photons 1e6" is a million; the run then stops at a missing scene file (exit 1: the
+    // command line was accepted, where a bad option exits 2). An option given twice takes its
+    // last value.
+    const std::string missing = " --headless --scene " + (scratchDir() / "none.gltf").string();
+    EXPECT_EQ(runDemo("--photons 1e6 --frames 1e1" + missing).exitCode, 1);
+    EXPECT_EQ(runDemo("--frames 2 --frames 3" + missing).exitCode, 1);
+    EXPECT_EQ(runDemo("--photons 1e6.5" + missing).exitCode, 2); // the check can fail
+    // --help wins over the rest of the line, a bad value included.
+    EXPECT_EQ(runDemo("--help --photons -1").exitCode, 0);
     // Leading zeros are decimal (CLI11 alone would read 010 as octal 8): ten frames profiled.
     const std::string base = (scratchDir() / "ten").string();
     ASSERT_EQ(runDemo("--scene cornell --headless --frames 010 --width 16 --height 16 "
