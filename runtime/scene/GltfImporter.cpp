@@ -625,6 +625,51 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
     return records;
 }
 
+namespace {
+
+Aabb unite(Aabb a, const Aabb& b) {
+    if (!b.empty()) {
+        a.extend(b.min);
+        a.extend(b.max);
+    }
+    return a;
+}
+
+/// A mesh far from all the others stretches the scene, and with it the default mesh edge
+/// bound (a 50th of its diagonal) every mesh is refined to: a stray object 400 km off leaves
+/// a room a few triangles. Names the first mesh that stretches the scene to more than ten
+/// times what the others span, and is itself under a tenth of it.
+void warnOfOutliers(const std::string& label,
+                    const std::vector<std::pair<const EntityRecord*, Aabb>>& records,
+                    const Aabb& all, float maxEdge) {
+    const std::size_t n = records.size();
+    if (n < 3) return; // of two meshes far apart, neither is the stray one
+    std::vector<Aabb> before(n + 1), after(n + 1); // unions of records [0, i) and [i, n)
+    for (std::size_t i = 0; i < n; ++i)
+        before[i + 1] = unite(before[i], records[i].second);
+    for (std::size_t i = n; i > 0; --i)
+        after[i - 1] = unite(after[i], records[i - 1].second);
+    const double diagonal = glm::length(glm::dvec3(all.extent()));
+    for (std::size_t i = 0; i < n; ++i) {
+        const Aabb rest = unite(before[i], after[i + 1]);
+        const Aabb& own = records[i].second;
+        const double restDiagonal = glm::length(glm::dvec3(rest.extent()));
+        if (!(10.0 * restDiagonal < diagonal &&
+              10.0 * glm::length(glm::dvec3(own.extent())) < diagonal))
+            continue;
+        const EntityRecord& r = *records[i].first;
+        logWarning(label, ": ", r.name.empty() ? r.source->field : r.name, " lies ",
+                   glm::length(glm::dvec3(own.center()) - glm::dvec3(rest.center())),
+                   " m from the rest of the scene, which it stretches from ", restDiagonal, " to ",
+                   diagonal, " m across: the default mesh edge bound, a 50th of that, is ", maxEdge,
+                   " m. Move it, or set the edge bound (--max-edge, "
+                   "SceneOptions::maxEdgeLength)");
+        return;
+    }
+}
+
+} // namespace
+
 void GltfReader::processMeshes(ImportedScene& scene) const {
     const auto worldAabb = [](const Mesh& mesh, const glm::mat4& world) {
         Aabb box;
@@ -638,8 +683,10 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
     const double minArea = double(MeshProcessingOptions{}.minTriangleArea);
     Aabb rawBounds;
     std::set<std::string> needlesNamed; // once per source mesh, not per instance
+    std::vector<std::pair<const EntityRecord*, Aabb>> recordBounds; // of the kept triangles
     for (const EntityRecord& r : scene.records) {
         if (!r.source) continue;
+        Aabb kept;
         const Mesh& mesh = r.source->mesh;
         const Aabb box = worldAabb(mesh, r.world);
         if (!isFinite(box.min) || !isFinite(box.max))
@@ -661,9 +708,14 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
                 }
                 continue;
             }
-            rawBounds.extend(glm::vec3(a));
-            rawBounds.extend(glm::vec3(b));
-            rawBounds.extend(glm::vec3(c));
+            kept.extend(glm::vec3(a));
+            kept.extend(glm::vec3(b));
+            kept.extend(glm::vec3(c));
+        }
+        if (!kept.empty()) {
+            rawBounds.extend(kept.min);
+            rawBounds.extend(kept.max);
+            recordBounds.emplace_back(&r, kept);
         }
         if (needles > 0 && needlesNamed.insert(r.source->field).second)
             logWarning(mLabel, ": ", r.source->field, ": ", needles,
@@ -681,7 +733,10 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
         }
     }
     float maxEdge = mOptions.maxEdgeLength;
-    if (maxEdge == 0.f && !rawBounds.empty()) maxEdge = glm::length(rawBounds.extent()) / 50.f;
+    if (maxEdge == 0.f && !rawBounds.empty()) {
+        maxEdge = glm::length(rawBounds.extent()) / 50.f;
+        warnOfOutliers(mLabel, recordBounds, rawBounds, maxEdge);
+    }
     scene.info.maxEdgeLength = maxEdge;
 
     std::vector<Material> materials(mModel.materials.size());

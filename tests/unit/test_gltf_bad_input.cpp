@@ -203,6 +203,44 @@ TEST(GltfBadInput, ANeedleTriangleIsNamedWhenItIsDropped) {
     EXPECT_NEAR(registry.ctx().get<SceneInfo>().bounds.extent().x, 2.f, 1e-6f);
 }
 
+TEST(GltfBadInput, AMeshFarFromTheRestIsNamedWhenItStretchesTheDefaultEdgeBound) {
+    // Three 2 m quads, two side by side and one 400 km off: the scene is 400 km across and the
+    // default edge bound 8 km, which leaves the room unrefined. A warning names the stray
+    // node; a layout without one (the third quad 3 m from the others) says nothing.
+    const float positions[] = {-1, 0, -1, 1, 0, -1, 1, 0, 1, -1, 0, 1};
+    const std::uint32_t indices[] = {0, 2, 1, 0, 3, 2};
+    {
+        std::ofstream bin(scratchFile("quad.bin"), std::ios::binary);
+        bin.write(reinterpret_cast<const char*>(positions), sizeof positions);
+        bin.write(reinterpret_cast<const char*>(indices), sizeof indices);
+    }
+    for (const auto& [offset, warned] : {std::pair{"4e5", true}, std::pair{"3", false}}) {
+        std::ofstream(scratchFile("stray.gltf")) << R"({"asset": {"version": "2.0"},
+            "scene": 0, "scenes": [{"nodes": [0, 1, 2]}],
+            "nodes": [{"mesh": 0, "name": "floor"},
+                      {"mesh": 0, "name": "next floor", "translation": [0, 0, 2]},
+                      {"mesh": 0, "name": "stray crate", "translation": [)"
+                                                 << offset << R"(, 0, 0]}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "buffers": [{"byteLength": 72, "uri": "quad.bin"}],
+            "bufferViews": [{"buffer": 0, "byteLength": 48},
+                            {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                           "min": [-1, 0, -1], "max": [1, 0, 1]},
+                          {"bufferView": 1, "componentType": 5125, "count": 6,
+                           "type": "SCALAR"}]})";
+        Registry registry;
+        ::testing::internal::CaptureStderr();
+        importGltf(registry, scratchFile("stray.gltf"), SceneOptions{});
+        const std::string log = ::testing::internal::GetCapturedStderr();
+        EXPECT_EQ(log.find("stray crate lies 400000 m from the rest of the scene") !=
+                      std::string::npos,
+                  warned)
+            << log;
+        EXPECT_EQ(log.find("lies") != std::string::npos, warned) << log;
+    }
+}
+
 TEST(GltfBadInput, DeepNestingIsRefusedBeforeParsing) {
     // 10000 nested arrays overflow tinygltf's recursive parser; the importer must not hand
     // them over. The scene sits in the good folder's copy so the external .bin resolves.
