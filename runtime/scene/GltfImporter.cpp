@@ -90,6 +90,12 @@ void GltfReader::loadModel(const std::vector<unsigned char>& bytes, std::string_
     } catch (const std::exception& e) { // tinygltf indexes with .at() on some bad input
         error = e.what();
     }
+    // tinygltf requires a skin's inverseBindMatrices, which glTF 2.0 leaves optional (identity
+    // matrices). qgi draws skinned meshes in their bind pose and never reads them: not an
+    // error here.
+    for (const std::string_view optional : {"'inverseBindMatrices' property is missing in Skin.\n"})
+        for (std::size_t at; (at = error.find(optional)) != std::string::npos;)
+            error.erase(at, optional.size());
     if (!mImages.field.empty()) fail(mImages.field, mImages.what);
     reportSkippedImages();
     // tinygltf reports some malformed values (a string where a number belongs, a colour of the

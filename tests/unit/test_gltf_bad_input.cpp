@@ -241,6 +241,24 @@ TEST(GltfBadInput, AMeshFarFromTheRestIsNamedWhenItStretchesTheDefaultEdgeBound)
     }
 }
 
+TEST(GltfBadInput, ASkinWithoutInverseBindMatricesLoadsInItsBindPose) {
+    // glTF 2.0 leaves a skin's inverseBindMatrices optional (identity); tinygltf calls it
+    // missing. Skinned meshes load in their bind pose with a warning either way.
+    fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                  fs::copy_options::overwrite_existing);
+    std::string text = triangleWithExtras("{}");
+    const std::string anchor = R"("name": "Triangle",)";
+    text.insert(text.find(anchor) + anchor.size(), R"("skin": 0,)");
+    text.insert(text.find('{') + 1, R"("skins": [{"joints": [0]}],)");
+    std::ofstream(scratchFile("skinned.gltf")) << text;
+    Registry registry;
+    ::testing::internal::CaptureStderr();
+    importGltf(registry, scratchFile("skinned.gltf"), kNoRefinement);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_NE(log.find("nodes[0].skin: skinning is not supported"), std::string::npos) << log;
+    EXPECT_EQ(registry.count<Mesh>(), 1u);
+}
+
 TEST(GltfBadInput, DeepNestingIsRefusedBeforeParsing) {
     // 10000 nested arrays overflow tinygltf's recursive parser; the importer must not hand
     // them over. The scene sits in the good folder's copy so the external .bin resolves.
