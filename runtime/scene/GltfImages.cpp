@@ -10,10 +10,17 @@
 #include <stb/stb_image.h>
 
 #include <memory>
+#include <string>
 
 namespace qgi::gltf_detail {
 
 namespace {
+
+/// stb_image's reason for its last failure; it gives none for some truncated data.
+std::string failureReason() {
+    const char* reason = stbi_failure_reason();
+    return reason && *reason ? reason : "truncated or corrupt image data";
+}
 
 bool isPngOrJpeg(const unsigned char* bytes, int size) {
     static constexpr unsigned char kPng[] = {0x89, 'P', 'N', 'G'};
@@ -30,14 +37,14 @@ std::string decodeRgba8(const unsigned char* bytes, std::size_t size, tinygltf::
     int width = 0, height = 0, channels = 0;
     // Read the header first: a few bytes of PNG can claim gigabytes of pixels.
     if (!stbi_info_from_memory(bytes, length, &width, &height, &channels))
-        return str("unreadable image header (", stbi_failure_reason(), ")");
+        return str("unreadable image header (", failureReason(), ")");
     if (width > kGltfMaxImageSide || height > kGltfMaxImageSide ||
         std::int64_t(width) * height > kGltfMaxImagePixels)
         return str(width, "x", height, " pixels exceed the limit of ", kGltfMaxImageSide,
                    " per side and ", kGltfMaxImagePixels, " in all");
     const std::unique_ptr<stbi_uc, void (*)(void*)> pixels(
         stbi_load_from_memory(bytes, length, &width, &height, &channels, 4), &stbi_image_free);
-    if (!pixels) return str("cannot be decoded (", stbi_failure_reason(), ")");
+    if (!pixels) return str("cannot be decoded (", failureReason(), ")");
     image.width = width;
     image.height = height;
     image.component = 4;
