@@ -256,11 +256,14 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         return passes(m.before, m.radiusBefore, q, light, h) ||
                passes(m.after, m.radiusAfter, q, light, h);
     };
-    const auto mayShadow = [&](const glm::vec3& q, float h) {
-        for (const Move& m : moves)
-            for (const AreaLight& light : mLights)
-                if (between(m, q, light, h)) return true;
-        return false;
+    // The (move, light) pairs, as m * lights + l, that pass for every x within h of q.
+    const std::size_t lightCount = mLights.size();
+    const auto passingPairs = [&](const glm::vec3& q, float h, std::vector<std::uint32_t>& out) {
+        out.clear();
+        for (std::size_t m = 0; m < moves.size(); ++m)
+            for (std::size_t l = 0; l < lightCount; ++l)
+                if (between(moves[m], q, mLights[l], h))
+                    out.push_back(std::uint32_t(m * lightCount + l));
     };
     // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
     // cells, each tested by its bounding sphere; then the points listed in passing cells (a
@@ -277,15 +280,25 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache&
         const glm::ivec3 lo = bi * kCullBlock, hi = glm::min(lo + kCullBlock, dims);
         const glm::vec3 size = glm::vec3(hi - lo) * cell;
         const glm::vec3 corner = grid.origin() + glm::vec3(lo) * cell;
-        if (!mayShadow(corner + 0.5f * size, 0.5f * glm::length(size))) return;
+        // A cell's ball lies inside its block's, so a pair the block fails every cell fails:
+        // the cells test only the block's passing pairs.
+        std::vector<std::uint32_t> pairs;
+        passingPairs(corner + 0.5f * size, 0.5f * glm::length(size), pairs);
+        if (pairs.empty()) return;
         const float h = 0.5f * std::sqrt(3.f) * cell;
+        const auto mayShadow = [&](const glm::vec3& centre) {
+            for (const std::uint32_t pair : pairs)
+                if (between(moves[pair / lightCount], centre, mLights[pair % lightCount], h))
+                    return true;
+            return false;
+        };
         for (int k = lo.z; k < hi.z; ++k)
             for (int j = lo.y; j < hi.y; ++j)
                 for (int i = lo.x; i < hi.x; ++i) {
                     const std::uint32_t c = std::uint32_t((k * dims.y + j) * dims.x + i);
                     if (grid.cellStart()[c] == grid.cellStart()[c + 1]) continue;
                     const glm::vec3 centre = grid.origin() + (glm::vec3(i, j, k) + 0.5f) * cell;
-                    if (mayShadow(centre, h)) passing[b].push_back(c);
+                    if (mayShadow(centre)) passing[b].push_back(c);
                 }
     });
     mCandidates.clear();
