@@ -34,12 +34,17 @@ std::uint32_t recordedWords(std::uint32_t shadowSamples) {
     return shadowSamples <= kMaxRecordedShadowSamples ? (shadowSamples + 31) / 32 : 0;
 }
 
-float maxScale(const glm::mat4& m) {
-    return std::max(
-        {glm::length(glm::vec3(m[0])), glm::length(glm::vec3(m[1])), glm::length(glm::vec3(m[2]))});
-}
-
 } // namespace
+
+float PointCacheSystem::MobileBound::radius(const glm::mat4& m) const {
+    // Each axis of the transformed box offset d (|d_i| <= e_i) is sum_i M_ji d_i, at most
+    // (|M| e)_j: a rotation, a scale or a shear (a turned child of a stretched parent).
+    const glm::mat3 linear(m);
+    glm::vec3 reach(0.f);
+    for (int i = 0; i < 3; ++i)
+        reach += glm::abs(linear[i]) * halfExtent[i];
+    return glm::length(reach);
+}
 
 PointCacheSystem::PointCacheSystem(const PointCacheSettings& settings) : mSettings(settings) {
     validate(settings);
@@ -125,15 +130,18 @@ void PointCacheSystem::build(Registry& registry) {
     mQueueKey.assign(cache.size(), 0.f);
     mQueue.clear();
 
+    // Where the ray scene has each mobile (it refuses poses it cannot use, keeping the last
+    // good one): the shadows the cache holds are of those poses.
     mMobiles.clear();
-    registry.view<const MobileMesh, const Mesh, const WorldTransform>().each(
-        [&](Entity e, const MobileMesh&, const Mesh& mesh, const WorldTransform& world) {
+    registry.view<const MobileMesh, const Mesh>().each(
+        [&](Entity e, const MobileMesh&, const Mesh& mesh) {
+            if (!scene->isMobile(e)) return;
             Aabb box;
             for (const glm::vec3& p : mesh.positions)
                 box.extend(p);
             if (box.empty()) return;
-            mMobiles[e] = MobileBound{box.center(), 0.5f * glm::length(box.extent()), world.matrix,
-                                      !outOfWorld(registry, e)};
+            mMobiles[e] = MobileBound{box.center(), 0.5f * box.extent(), scene->mobilePose(e),
+                                      scene->mobileActive(e)};
         });
     mNeedsFull = true;
     mBuilt = true;
@@ -205,34 +213,35 @@ void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments&
     }
 }
 
-void PointCacheSystem::queueShadowed(const Registry& registry, const PointCache& cache) {
+void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& scene,
+                                     const PointCache& cache) {
     struct Move {
         glm::vec3 before, after;
         float radiusBefore, radiusAfter;
     };
     std::vector<Move> moves;
     // Moved, taken out or put back (MobileMesh::active): both places, whether it is there
-    // now or not, which is conservative.
+    // now or not, which is conservative. The poses are the ray scene's, which the shadow rays
+    // meet: a pose it refused (not finite, not invertible, past kMaxPoseReach) moved nothing.
     const auto follow = [&](Entity e) {
         const auto it = mMobiles.find(e);
-        if (it == mMobiles.end()) return;
-        const WorldTransform* world = registry.tryGet<WorldTransform>(e);
-        if (!world) return;
+        if (it == mMobiles.end() || !scene.isMobile(e)) return;
         MobileBound& m = it->second;
-        const bool active = !outOfWorld(registry, e);
-        if (m.pose == world->matrix && m.active == active) return; // nothing changed
+        const glm::mat4& pose = scene.mobilePose(e);
+        const bool active = scene.mobileActive(e);
+        if (m.pose == pose && m.active == active) return; // nothing changed
         if (!m.active && !active) { // moved while out of the world: shadows nothing
-            m.pose = world->matrix;
+            m.pose = pose;
             return;
         }
         m.active = active;
         Move move;
         move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));
-        move.radiusBefore = m.radius * maxScale(m.pose);
-        move.after = glm::vec3(world->matrix * glm::vec4(m.centre, 1.f));
-        move.radiusAfter = m.radius * maxScale(world->matrix);
-        m.pose = world->matrix;
-        if (std::isfinite(move.after.x) && std::isfinite(move.radiusAfter)) moves.push_back(move);
+        move.radiusBefore = m.radius(m.pose);
+        move.after = glm::vec3(pose * glm::vec4(m.centre, 1.f));
+        move.radiusAfter = m.radius(pose);
+        m.pose = pose;
+        moves.push_back(move);
     };
     forEachMovedOrSwitched(registry, follow);
     if (moves.empty() || cache.size() == 0) return;
@@ -411,7 +420,7 @@ void PointCacheSystem::update(Registry& registry, const FrameContext&) {
     // ---- soft shadows around moved mobiles, within the budget ---------------------------------
     {
         const StageTimer timer(profiler, "queue", mStats.queueMs);
-        queueShadowed(registry, *cache);
+        queueShadowed(registry, *scene, *cache);
     }
     if (!mQueue.empty()) {
         const StageTimer timer(profiler, "refresh", mStats.refreshMs);

@@ -98,13 +98,17 @@ private:
                      std::span<const std::uint32_t> points, bool everyLight);
     void estimateIndirect(PointCache& cache, const PhotonSegments& segments,
                           std::span<const std::uint32_t> indices, double sign);
-    void queueShadowed(const Registry& registry, const PointCache& cache);
+    void queueShadowed(const Registry& registry, const RayScene& scene, const PointCache& cache);
 
+    /// A mobile's object-space box, and where the ray scene last had it.
     struct MobileBound {
-        glm::vec3 centre{0.f}; ///< object space
-        float radius = 0.f;    ///< object space
-        glm::mat4 pose{1.f};   ///< last pose seen
-        bool active = true;    ///< last MobileMesh::active seen
+        glm::vec3 centre{0.f};     ///< object space
+        glm::vec3 halfExtent{0.f}; ///< object space
+        glm::mat4 pose{1.f};       ///< the ray scene's pose when last seen
+        bool active = true;        ///< the ray scene's MobileMesh::active when last seen
+        /// Radius of a ball around pose x centre holding the box under `pose`, shear included:
+        /// the half-diagonal of the transformed box, |M| e.
+        float radius(const glm::mat4& pose) const;
     };
 
     PointCacheSettings mSettings; ///< as given; resolved ones live in the PointCache

@@ -59,12 +59,20 @@ std::vector<AreaLight> findAreaLights(const Registry& registry, const Aabb& scen
 
 namespace {
 
-/// The estimate of shadeAreaLight with each sample's shadow ray answered by
-/// reaches(sample, ray): true where the ray gets to the light.
-template <typename Reaches>
+/// How integrateAreaLight learns whether a sample's shadow ray gets through.
+enum class Rays {
+    Trace,  ///< cast it against `scene`
+    Record, ///< cast it, and set the sample's bit of `reached` where it gets through
+    Replay, ///< read the sample's bit of `reached`; no ray
+};
+
+/// The estimate of shadeAreaLight. One function body for all three ways, so that a replay
+/// computes every sample's weight with the very instructions the recording did (two
+/// instantiations could contract multiply-adds differently) and gives its value bit for bit.
 LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
                                const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
-                               std::uint32_t key, Reaches&& reaches) {
+                               std::uint32_t key, Rays rays, const RayScene* scene,
+                               std::uint32_t* reached) {
     const std::uint64_t seedKey = photon::mixBits(seed ^ kShadowStream);
     const auto u = [&](std::uint32_t dimension) {
         return photon::hashUniform(seedKey, key, lightIndex, dimension);
@@ -103,7 +111,14 @@ LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex,
         ray.direction = photon::offsetFromSurface(y, tri.normal) - origin;
         ray.tnear = 0.f;
         ray.tfar = 1.f - 1e-4f;
-        if (reaches(s, ray)) visible += f;
+        bool through;
+        if (rays == Rays::Replay) {
+            through = ((reached[s / 32] >> (s % 32)) & 1u) != 0;
+        } else {
+            through = !scene->occluded(ray);
+            if (through && rays == Rays::Record) reached[s / 32] |= 1u << (s % 32);
+        }
+        if (through) visible += f;
     }
     LightSample out;
     out.irradiance = light.radiance * float(double(light.area) * visible / double(samples));
@@ -116,8 +131,8 @@ LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex,
 LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
                            const glm::vec3& x, const glm::vec3& n, std::uint32_t samples,
                            std::uint64_t seed, std::uint32_t key) {
-    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key,
-                              [&](std::uint32_t, const Ray& ray) { return !scene.occluded(ray); });
+    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key, Rays::Trace, &scene,
+                              nullptr);
 }
 
 LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::uint32_t lightIndex,
@@ -126,21 +141,17 @@ LightSample shadeAreaLight(const RayScene& scene, const AreaLight& light, std::u
                            std::span<std::uint32_t> reached) {
     QGI_ASSERT(reached.size() * 32 >= samples);
     std::fill(reached.begin(), reached.end(), 0u);
-    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key,
-                              [&](std::uint32_t s, const Ray& ray) {
-                                  if (scene.occluded(ray)) return false;
-                                  reached[s / 32] |= 1u << (s % 32);
-                                  return true;
-                              });
+    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key, Rays::Record, &scene,
+                              reached.data());
 }
 
 LightSample replayAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
                             const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
                             std::uint32_t key, std::span<const std::uint32_t> reached) {
     QGI_ASSERT(reached.size() * 32 >= samples);
-    return integrateAreaLight(
-        light, lightIndex, x, n, samples, seed, key,
-        [&](std::uint32_t s, const Ray&) { return ((reached[s / 32] >> (s % 32)) & 1u) != 0; });
+    // Replay only reads the bits.
+    return integrateAreaLight(light, lightIndex, x, n, samples, seed, key, Rays::Replay, nullptr,
+                              const_cast<std::uint32_t*>(reached.data()));
 }
 
 float ambientOcclusion(const RayScene& scene, const glm::vec3& x, const glm::vec3& n,

@@ -812,6 +812,67 @@ TEST(PointCacheUpdate, ARefreshTracesOnlyTheLightsAMoveMayShadowAndEqualsAFullRe
     EXPECT_EQ(mismatches, 0u);
 }
 
+/// Every point's stored light against tracing every light afresh: the count that differ.
+std::size_t pointsOffAFullReshade(const PointCacheSystem& system, const PointCache& cache,
+                                  const RayScene& rays) {
+    std::size_t mismatches = 0;
+    const auto lights = std::uint32_t(system.areaLights().size());
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        glm::vec3 sum(0.f);
+        bool visibilityOff = false;
+        for (std::uint32_t l = 0; l < lights; ++l) {
+            const LightSample s =
+                shadeAreaLight(rays, system.areaLights()[l], l, cache.position[p], cache.normal[p],
+                               cache.settings.shadowSamples, cache.settings.seed, cache.dart[p]);
+            sum += s.irradiance;
+            visibilityOff |= s.visibility != cache.visibility[p * lights + l];
+        }
+        mismatches += visibilityOff || std::memcmp(&sum, &cache.direct[p], sizeof sum) != 0;
+    }
+    return mismatches;
+}
+
+TEST(PointCacheUpdate, PosesTheRaySceneRefusesAndShearedPosesKeepRefreshesExact) {
+    // The two-panel scene and its mobile blocker, moved through poses that test the bounds
+    // the refresh relies on; after each, the queue is drained and every point must equal a
+    // full re-shade bit for bit:
+    //  - a pose the ray scene refuses (scaled to nothing, or parked past kMaxPoseReach): the
+    //    blocker stays where it was for every ray, so the next move must be from there;
+    //  - sheared poses (a turned child of a stretched parent): the blocker reaches farther
+    //    from its centre than its longest axis's scale says.
+    ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true, /*secondLight=*/true);
+    RayScene& rays = scene.registry.ctx().get<RayScene>();
+    PointCacheSettings settings = budgetedSettings();
+    settings.updateBudget = 100000; // every queued point each frame
+    PointCacheSystem system(settings);
+    system.build(scene.registry);
+    const PointCache& cache = scene.registry.ctx().get<PointCache>();
+    system.update(scene.registry, FrameContext{});
+    scene.registry.clearChanges();
+    std::uint64_t frame = 1;
+    const auto pose = [&](const glm::mat4& m, const char* what) {
+        scene.registry.patch<WorldTransform>(scene.blocker).matrix = m;
+        rays.syncMoved(scene.registry);
+        system.update(scene.registry, FrameContext{frame++});
+        scene.registry.clearChanges();
+        ASSERT_EQ(system.lastFrame().pending, 0u) << what;
+        EXPECT_EQ(pointsOffAFullReshade(system, cache, rays), 0u) << what;
+    };
+    pose(translation({0.f, kBlockerY, 0.f}), "under the first panel");
+    pose(translation({0.f, -50.f, 0.f}) * glm::scale(glm::mat4(1.f), glm::vec3(0.f)),
+         "scaled to nothing (refused)");
+    pose(translation({2.f, kBlockerY, 0.f}), "between the panels");
+    pose(translation({1e8f, 0.f, 0.f}), "parked past the reach (refused)");
+    pose(translation({kSecondLightX, kBlockerY, 0.f}), "under the second panel");
+    // Unit columns (so a longest-axis scale of 1), the box's corner 1.35 times as far out.
+    glm::mat4 shear(1.f);
+    shear[1] = glm::vec4(0.8f, 0.6f, 0.f, 0.f);
+    shear[2] = glm::vec4(0.8f, 0.f, 0.6f, 0.f);
+    for (int k = 0; k < 12; ++k)
+        pose(translation({0.35f * float(k) - 0.2f, kBlockerY, 0.1f * float(k % 3)}) * shear,
+             "sheared");
+}
+
 TEST(PointCacheUpdate, ABlockerTakenOutAndPutBackDrainsToFreshShadows) {
     ShadowScene scene(true, /*blockerMobile=*/true, /*withCeiling=*/true);
     const PointCacheSettings settings = budgetedSettings();
