@@ -24,6 +24,12 @@ struct PointCacheSample {
 /// shadow; with more samples every light of a refreshed point is traced again.
 inline constexpr std::uint32_t kMaxRecordedShadowSamples = 64;
 
+/// 32-bit words PointCache::reached holds per (point, light) for `shadowSamples` samples: 0
+/// past kMaxRecordedShadowSamples.
+inline std::uint32_t recordedShadowWords(std::uint32_t shadowSamples) {
+    return shadowSamples <= kMaxRecordedShadowSamples ? (shadowSamples + 31) / 32 : 0;
+}
+
 /** World resource: the precalculated point set and the shading stored in it (seed 003).
  *  Points sit on static surfaces only; each has a unit normal facing the side light reaches,
  *  a spacing radius r_p in [rMin, rMax] and a search radius R_p = searchScale r_p.

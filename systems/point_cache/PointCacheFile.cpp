@@ -180,7 +180,7 @@ void readPointCacheFile(const std::string& path, std::uint64_t key, PointCache& 
     const auto points = in.value<std::uint64_t>();
     const auto lights = in.value<std::uint32_t>();
     const auto words = in.value<std::uint32_t>();
-    if (words > (kMaxRecordedShadowSamples + 31) / 32)
+    if (words > recordedShadowWords(kMaxRecordedShadowSamples))
         fail("point cache file '", path, "' records ", words,
              " words of shadow samples per light, more than are ever written");
     const std::uint64_t perPoint = 4 * (3 + 3 + 1 + 1 + 1 + 3) + 4ull * lights * (1 + words);

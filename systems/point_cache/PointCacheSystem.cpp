@@ -30,10 +30,6 @@ namespace {
 // queueShadowed culls the grid's cells in blocks of this many per axis before testing cells.
 constexpr int kCullBlock = 8;
 
-std::uint32_t recordedWords(std::uint32_t shadowSamples) {
-    return shadowSamples <= kMaxRecordedShadowSamples ? (shadowSamples + 31) / 32 : 0;
-}
-
 } // namespace
 
 float PointCacheSystem::MobileBound::radius(const glm::mat4& m) const {
@@ -75,10 +71,10 @@ void PointCacheSystem::build(Registry& registry) {
             if (cache.lightCount != mLights.size())
                 fail("point cache file '", s.cacheFile, "' holds ", cache.lightCount,
                      " lights, the scene has ", mLights.size(), " (stale)");
-            if (cache.sampleWords != recordedWords(s.shadowSamples))
+            if (cache.sampleWords != recordedShadowWords(s.shadowSamples))
                 fail("point cache file '", s.cacheFile, "' records ", cache.sampleWords,
-                     " words of samples per light, this build ", recordedWords(s.shadowSamples),
-                     " (stale)");
+                     " words of samples per light, this build ",
+                     recordedShadowWords(s.shadowSamples), " (stale)");
             mLoaded = true;
             logInfo("point cache: loaded ", cache.size(), " points from '", s.cacheFile, "'");
         } catch (const Error& error) {
@@ -91,7 +87,7 @@ void PointCacheSystem::build(Registry& registry) {
         cache.lightCount = std::uint32_t(mLights.size());
         cache.direct.assign(cache.size(), glm::vec3(0.f));
         cache.visibility.assign(cache.size() * mLights.size(), 1.f);
-        cache.sampleWords = recordedWords(s.shadowSamples);
+        cache.sampleWords = recordedShadowWords(s.shadowSamples);
         cache.reached.assign(cache.visibility.size() * cache.sampleWords, 0u);
     }
     mLightStale.assign(cache.sampleWords > 0 ? cache.size() * mLights.size() : 0, 0);
@@ -158,7 +154,6 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
             std::size_t tracedHere = 0, replayedHere = 0;
             for (std::size_t k = range.begin(); k != range.end(); ++k) {
                 const std::uint32_t p = points[k];
-                const bool all = everyLight;
                 const glm::vec3 x = cache.position[p], n = cache.normal[p];
                 glm::vec3 sum(0.f);
                 for (std::size_t l = 0; l < lights; ++l) {
@@ -172,7 +167,7 @@ void PointCacheSystem::shadePoints(const RayScene& scene, PointCache& cache,
                     } else {
                         const std::span<std::uint32_t> reached(
                             &cache.reached[pl * cache.sampleWords], cache.sampleWords);
-                        if (all || mLightStale[pl]) {
+                        if (everyLight || mLightStale[pl]) {
                             ls = shadeAreaLight(scene, mLights[l], light, x, n, s.shadowSamples,
                                                 s.seed, cache.dart[p], reached);
                             ++tracedHere;
@@ -266,13 +261,13 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& s
                passes(m.after, m.radiusAfter, q, light, h);
     };
     // The (move, light) pairs, as m * lights + l, that pass for every x within h of q.
-    const std::size_t lightCount = mLights.size();
+    const std::size_t lights = mLights.size();
     const auto passingPairs = [&](const glm::vec3& q, float h, std::vector<std::uint32_t>& out) {
         out.clear();
         for (std::size_t m = 0; m < moves.size(); ++m)
-            for (std::size_t l = 0; l < lightCount; ++l)
+            for (std::size_t l = 0; l < lights; ++l)
                 if (between(moves[m], q, mLights[l], h))
-                    out.push_back(std::uint32_t(m * lightCount + l));
+                    out.push_back(std::uint32_t(m * lights + l));
     };
     // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
     // cells, each tested by its bounding sphere; then the points listed in passing cells (a
@@ -297,8 +292,7 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& s
         const float h = 0.5f * std::sqrt(3.f) * cell;
         const auto mayShadow = [&](const glm::vec3& centre) {
             for (const std::uint32_t pair : pairs)
-                if (between(moves[pair / lightCount], centre, mLights[pair % lightCount], h))
-                    return true;
+                if (between(moves[pair / lights], centre, mLights[pair % lights], h)) return true;
             return false;
         };
         for (int k = lo.z; k < hi.z; ++k)
@@ -324,7 +318,6 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& s
     // pose) may stand between it and a light; +inf otherwise. Each such light is marked
     // stale for the point: its recorded samples no longer hold.
     std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
-    const std::size_t lights = mLights.size();
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, mCandidates.size(), 256),
         [&](const tbb::blocked_range<std::size_t>& range) {
