@@ -18,6 +18,8 @@
 #include <fstream>
 #include <random>
 #include <set>
+#include <span>
+#include <sstream>
 #include <string>
 
 namespace qgi {
@@ -169,6 +171,38 @@ TEST(GltfBadInput, AMisspeltExtrasKeyIsNamedWithTheOneMeant) {
     }
 }
 
+/// Writes `positions` (x, y, z triples) and triangle `indices` to scratch file NAME.bin, and
+/// returns the glTF members that describe them: "buffers", "bufferViews" and "accessors"
+/// (POSITION is accessor 0, the indices accessor 1).
+std::string indexedMeshBuffers(const std::string& name, std::span<const float> positions,
+                               std::span<const std::uint32_t> indices) {
+    {
+        std::ofstream bin(scratchFile(name + ".bin"), std::ios::binary);
+        bin.write(reinterpret_cast<const char*>(positions.data()),
+                  std::streamsize(positions.size_bytes()));
+        bin.write(reinterpret_cast<const char*>(indices.data()),
+                  std::streamsize(indices.size_bytes()));
+    }
+    Aabb box;
+    for (std::size_t i = 0; i + 2 < positions.size(); i += 3)
+        box.extend({positions[i], positions[i + 1], positions[i + 2]});
+    std::ostringstream out;
+    out << R"("buffers": [{"byteLength": )" << positions.size_bytes() + indices.size_bytes()
+        << R"(, "uri": ")" << name << R"(.bin"}],
+        "bufferViews": [{"buffer": 0, "byteLength": )"
+        << positions.size_bytes() << R"(},
+                        {"buffer": 0, "byteOffset": )"
+        << positions.size_bytes() << R"(, "byteLength": )" << indices.size_bytes() << R"(}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": )"
+        << positions.size() / 3 << R"(, "type": "VEC3",
+                       "min": [)"
+        << box.min.x << ", " << box.min.y << ", " << box.min.z << R"(], "max": [)" << box.max.x
+        << ", " << box.max.y << ", " << box.max.z << R"(]},
+                      {"bufferView": 1, "componentType": 5125, "count": )"
+        << indices.size() << R"(, "type": "SCALAR"}])";
+    return out.str();
+}
+
 TEST(GltfBadInput, ANeedleTriangleIsNamedWhenItIsDropped) {
     // A floor quad, and a triangle 0.08 m^2 in area with one corner 10,000 km off: a height of
     // 4 cm over that length is a needle, which processing drops like a degenerate triangle.
@@ -176,20 +210,11 @@ TEST(GltfBadInput, ANeedleTriangleIsNamedWhenItIsDropped) {
     const float positions[] = {-1, 0, -1,   1, 0,    -1,   1, 0,    1,    -1,  0,
                                1,  0, 0.5f, 0, 0.4f, 0.5f, 0, 1e7f, 0.5f, 0.4f};
     const std::uint32_t indices[] = {0, 2, 1, 0, 3, 2, 4, 5, 6};
-    {
-        std::ofstream bin(scratchFile("needle.bin"), std::ios::binary);
-        bin.write(reinterpret_cast<const char*>(positions), sizeof positions);
-        bin.write(reinterpret_cast<const char*>(indices), sizeof indices);
-    }
-    std::ofstream(scratchFile("needle.gltf")) << R"({"asset": {"version": "2.0"},
+    std::ofstream(scratchFile("needle.gltf"))
+        << R"({"asset": {"version": "2.0"},
         "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-        "buffers": [{"byteLength": 120, "uri": "needle.bin"}],
-        "bufferViews": [{"buffer": 0, "byteLength": 84},
-                        {"buffer": 0, "byteOffset": 84, "byteLength": 36}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 7, "type": "VEC3",
-                       "min": [-1, 0, -1], "max": [1e7, 0.5, 1]},
-                      {"bufferView": 1, "componentType": 5125, "count": 9, "type": "SCALAR"}]})";
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],)"
+        << indexedMeshBuffers("needle", positions, indices) << "}";
     Registry registry;
     ::testing::internal::CaptureStderr();
     importGltf(registry, scratchFile("needle.gltf"), kNoRefinement);
@@ -209,11 +234,7 @@ TEST(GltfBadInput, AMeshFarFromTheRestIsNamedWhenItStretchesTheDefaultEdgeBound)
     // node; a layout without one (the third quad 3 m from the others) says nothing.
     const float positions[] = {-1, 0, -1, 1, 0, -1, 1, 0, 1, -1, 0, 1};
     const std::uint32_t indices[] = {0, 2, 1, 0, 3, 2};
-    {
-        std::ofstream bin(scratchFile("quad.bin"), std::ios::binary);
-        bin.write(reinterpret_cast<const char*>(positions), sizeof positions);
-        bin.write(reinterpret_cast<const char*>(indices), sizeof indices);
-    }
+    const std::string buffers = indexedMeshBuffers("quad", positions, indices);
     for (const auto& [offset, warned] : {std::pair{"4e5", true}, std::pair{"3", false}}) {
         std::ofstream(scratchFile("stray.gltf")) << R"({"asset": {"version": "2.0"},
             "scene": 0, "scenes": [{"nodes": [0, 1, 2]}],
@@ -221,14 +242,8 @@ TEST(GltfBadInput, AMeshFarFromTheRestIsNamedWhenItStretchesTheDefaultEdgeBound)
                       {"mesh": 0, "name": "next floor", "translation": [0, 0, 2]},
                       {"mesh": 0, "name": "stray crate", "translation": [)"
                                                  << offset << R"(, 0, 0]}],
-            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-            "buffers": [{"byteLength": 72, "uri": "quad.bin"}],
-            "bufferViews": [{"buffer": 0, "byteLength": 48},
-                            {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
-            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
-                           "min": [-1, 0, -1], "max": [1, 0, 1]},
-                          {"bufferView": 1, "componentType": 5125, "count": 6,
-                           "type": "SCALAR"}]})";
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],)"
+                                                 << buffers << "}";
         Registry registry;
         ::testing::internal::CaptureStderr();
         importGltf(registry, scratchFile("stray.gltf"), SceneOptions{});
