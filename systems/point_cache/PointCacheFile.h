@@ -17,7 +17,8 @@ inline constexpr std::uint32_t kPointCacheFileVersion = 2;
 /// code changes what a file of the same layout would hold, so files of older code are stale.
 /// 2: lamps with a LightStandIn are no area lights of the cache.
 /// 3: the soft shadows come from one integration body for traced and replayed samples.
-inline constexpr std::uint32_t kPointCacheBakeRevision = 3;
+/// 4: points on axis-aligned faces lie on the face's plane exactly.
+inline constexpr std::uint32_t kPointCacheBakeRevision = 4;
 
 /** Key of a cache file: FNV-1a 64 over the file version and bake revision, every setting that
  * shapes the point set or its stored shading (resolved values), the scene's static and mobile

@@ -71,6 +71,34 @@ struct Landing {
     glm::vec3 normal{0.f};
 };
 
+/// A landing on a static triangle that lies in a plane of constant x, y or z (its world
+/// corners share that coordinate bit for bit, as the ray scene holds them) is put on the plane
+/// exactly, with the axis as its normal: origin + t * direction lands within rounding of the
+/// plane and a normalised normal can miss 1 by an ulp, and the point cache's DETP discs group
+/// into exact planes only when their normals and their centres' coordinate agree bit for bit
+/// (DiscIndex: one plane crossing per segment instead of a walk through overlapping discs).
+void ontoAxisPlane(const Registry& registry, const Hit& hit, Landing& landing) {
+    int axis = -1;
+    for (int a = 0; a < 3; ++a)
+        if (landing.normal[(a + 1) % 3] == 0.f && landing.normal[(a + 2) % 3] == 0.f) axis = a;
+    if (axis < 0) return;
+    const Mesh* mesh = registry.tryGet<Mesh>(hit.entity);
+    const WorldTransform* world = registry.tryGet<WorldTransform>(hit.entity);
+    if (!mesh || !world || 3 * std::size_t(hit.primitive) + 2 >= mesh->indices.size()) return;
+    float coordinate = 0.f;
+    for (int k = 0; k < 3; ++k) {
+        const std::uint32_t index = mesh->indices[3 * std::size_t(hit.primitive) + k];
+        if (index >= mesh->positions.size()) return;
+        // The ray scene's expression for a static vertex in the world, so the same bits.
+        const float c = glm::vec3(world->matrix * glm::vec4(mesh->positions[index], 1.f))[axis];
+        if (k > 0 && c != coordinate) return;
+        coordinate = c;
+    }
+    landing.position[axis] = coordinate;
+    landing.normal = glm::vec3(0.f);
+    landing.normal[axis] = hit.normal[axis] > 0.f ? 1.f : -1.f;
+}
+
 } // namespace
 
 Aabb staticBounds(const Registry& registry) {
@@ -195,9 +223,10 @@ PointSetStats buildPointSet(const Registry& registry, const RayScene& scene,
                                   hasAo[k] = 0;
                                   if (!l.valid) continue;
                                   l.position = ray.origin + hit->t * ray.direction;
-                                  l.normal = glm::dot(hit->normal, ray.direction) < 0.f
-                                                 ? hit->normal
-                                                 : -hit->normal;
+                                  l.normal = hit->normal;
+                                  ontoAxisPlane(registry, *hit, l);
+                                  if (glm::dot(l.normal, ray.direction) >= 0.f)
+                                      l.normal = -l.normal;
                                   const float e = grid.nearest(l.position, cache.position);
                                   if (!s.trivialTests || (e >= s.rMin && e < s.rMax)) {
                                       aoAhead[k] = aoOf(l, d);

@@ -8,6 +8,7 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
+#include "systems/detp/DiscIndex.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/point_cache/PointCacheFile.h"
 #include "systems/point_cache/PointCacheSettings.h"
@@ -18,6 +19,8 @@
 #include "test_photon_scenes.h"
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/matrix.hpp>
 #include <gtest/gtest.h>
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/parallel_for.h>
@@ -149,6 +152,60 @@ TEST(PointSetBuild, EveryPointKeepsItsRadiusFromEarlierPoints) {
             ASSERT_GE(d, cache.settings.rMin);
         }
     }
+}
+
+TEST(PointSetBuild, PointsOnAxisAlignedFacesLieOnTheirPlaneExactlyAndGroupIntoDiscPlanes) {
+    // The room's and pillar's faces are the planes x, z = +-2, +-0.2 and y = +-1. A crate turned
+    // 30 degrees about y keeps its top and bottom in planes of constant y, not its sides.
+    Registry registry;
+    addMesh(registry, boxMesh({2.f, 1.f, 2.f}, true), glm::mat4(1.f), grey(0.7f), false, "room");
+    addMesh(registry, boxMesh({0.2f, 1.f, 0.2f}), glm::mat4(1.f), grey(0.7f), false, "pillar");
+    addPointLight(registry, {1.2f, 0.8f, 1.2f}, 20.f);
+    const float turn = glm::radians(30.f);
+    const glm::mat4 crateWorld =
+        translation({-1.2f, -0.7f, 1.1f}) * glm::rotate(glm::mat4(1.f), turn, {0.f, 1.f, 0.f});
+    addMesh(registry, boxMesh(glm::vec3(0.3f)), crateWorld, grey(0.5f), false, "crate");
+    test::buildRayScene(registry);
+    const PointCache cache = buildSet(registry, roomSettings(), nullptr);
+    ASSERT_GT(cache.size(), 500u);
+    const float crateTop = glm::vec3(crateWorld * glm::vec4(0.f, 0.3f, 0.f, 1.f)).y;
+    std::size_t onCrateSides = 0, onCrateTop = 0;
+    std::vector<glm::vec3> axisCentres, axisNormals;
+    for (std::size_t p = 0; p < cache.size(); ++p) {
+        const glm::vec3 x = cache.position[p], n = cache.normal[p];
+        const glm::vec3 local = glm::vec3(glm::inverse(crateWorld) * glm::vec4(x, 1.f));
+        const bool onCrate =
+            std::max({std::abs(local.x), std::abs(local.y), std::abs(local.z)}) < 0.3f + 1e-4f;
+        if (onCrate && std::abs(local.y) < 0.3f - 1e-4f) {
+            // A side: its normal is the turned one, left as the ray scene gave it.
+            ++onCrateSides;
+            EXPECT_NE(n.x, 0.f) << "point " << p;
+            EXPECT_NE(n.z, 0.f) << "point " << p;
+            continue;
+        }
+        int axis = -1;
+        for (int a = 0; a < 3; ++a)
+            if (std::abs(n[a]) == 1.f && n[(a + 1) % 3] == 0.f && n[(a + 2) % 3] == 0.f) axis = a;
+        ASSERT_GE(axis, 0) << "point " << p << " normal " << n.x << " " << n.y << " " << n.z;
+        axisCentres.push_back(x);
+        axisNormals.push_back(n);
+        const float c = x[axis];
+        if (onCrate) {
+            ++onCrateTop;
+            EXPECT_EQ(c, crateTop) << "point " << p;
+        } else if (axis == 1)
+            EXPECT_TRUE(c == 1.f || c == -1.f) << "point " << p << " y " << c;
+        else
+            EXPECT_TRUE(c == 2.f || c == -2.f || c == 0.2f || c == -0.2f)
+                << "point " << p << " axis " << axis << " at " << c;
+    }
+    EXPECT_GT(onCrateSides, 5u);
+    ASSERT_GE(onCrateTop, DiscIndex::kMinPlaneDiscs); // enough to make a plane of their own
+    // Then the discs of those points group into the index's exact planes, every one of them.
+    DiscIndex discs(registry.ctx().get<RayScene>().device(), DiscIndex::Motion::Static);
+    discs.build(axisCentres, axisNormals, cache.settings.detpRadius);
+    EXPECT_EQ(discs.planarDiscCount(), axisCentres.size());
+    EXPECT_EQ(discs.tiltedPlaneCount(), 0u);
 }
 
 TEST(PointSetBuild, TrivialTestsChangeOnlyTheAoCallCount) {
