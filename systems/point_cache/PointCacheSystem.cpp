@@ -5,13 +5,13 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/core/Log.h"
-#include "runtime/math/Distance.h"
 #include "runtime/profile/StageTimer.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneQueries.h"
 #include "systems/photon_update/PhotonStore.h"
 #include "systems/point_cache/PointCacheFile.h"
+#include "systems/point_cache/ShadowCandidates.h"
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
@@ -25,12 +25,6 @@
 #include <numeric>
 
 namespace qgi {
-namespace {
-
-// queueShadowed culls the grid's cells in blocks of this many per axis before testing cells.
-constexpr int kCullBlock = 8;
-
-} // namespace
 
 float PointCacheSystem::MobileBound::radius(const glm::mat4& m) const {
     // Each axis of the transformed box offset d (|d_i| <= e_i) is sum_i M_ji d_i, at most
@@ -122,7 +116,6 @@ void PointCacheSystem::build(Registry& registry) {
     mPowerSum.assign(cache.size(), glm::dvec3(0.0));
     mIsTouched.assign(cache.size(), 0);
     mQueuedFlag.assign(cache.size(), 0);
-    mCandidateFlag.assign(cache.size(), 0);
     mQueueKey.assign(cache.size(), 0.f);
     mQueue.clear();
 
@@ -199,6 +192,7 @@ void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments&
     for (const std::uint32_t s : indices)
         if (segments.bounce[s] != 0) mIndirect.push_back(s);
     mDiscs->collectCrossings(segments, mIndirect, mCrossings);
+    mStats.discCrossings += mCrossings.size();
     for (const DiscCrossing& c : mCrossings) {
         mPowerSum[c.disc] += sign * glm::dvec3(segments.power[c.segment]);
         if (!mIsTouched[c.disc]) {
@@ -210,11 +204,7 @@ void PointCacheSystem::estimateIndirect(PointCache& cache, const PhotonSegments&
 
 void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& scene,
                                      const PointCache& cache) {
-    struct Move {
-        glm::vec3 before, after;
-        float radiusBefore, radiusAfter;
-    };
-    std::vector<Move> moves;
+    std::vector<MobileMove> moves;
     // Moved, taken out or put back (MobileMesh::active): both places, whether it is there
     // now or not, which is conservative. The poses are the ray scene's, which the shadow rays
     // meet: a pose it refused (not finite, not invertible, past kMaxPoseReach) moved nothing.
@@ -230,119 +220,27 @@ void PointCacheSystem::queueShadowed(const Registry& registry, const RayScene& s
             return;
         }
         m.active = active;
-        Move move;
-        move.before = glm::vec3(m.pose * glm::vec4(m.centre, 1.f));
-        move.radiusBefore = m.radius(m.pose);
-        move.after = glm::vec3(pose * glm::vec4(m.centre, 1.f));
-        move.radiusAfter = m.radius(pose);
+        moves.push_back(
+            MobileMove::make(glm::vec3(m.pose * glm::vec4(m.centre, 1.f)), m.radius(m.pose),
+                             glm::vec3(pose * glm::vec4(m.centre, 1.f)), m.radius(pose)));
         m.pose = pose;
-        moves.push_back(move);
     };
     forEachMovedOrSwitched(registry, follow);
     if (moves.empty() || cache.size() == 0) return;
-    // Whether a shadow ray from x to a light may pass a moved mobile (old or new pose): the
-    // rays from x to points within the light's bounding radius b of its centre L lie in the
-    // cone distanceBeyondCone(c, x, L, b) measures, which a ball (c, R) can meet only where
-    // that is below R. A ray's ends lie up to mRaySlack off x and the light's points, which
-    // moves each of its points by as much; an apex moved by h (any x within h of a cell's
-    // centre q) moves each point of the cone by at most h. h = 0: the point test itself.
-    // The cone lies inside the capsule of radius b around the segment from x to L, so a
-    // ball clear of the capsule (with mRaySlack more for the float test's rounding) is clear
-    // of the cone: most pairs are settled by that cheaper test.
-    const auto passes = [&](const glm::vec3& c, float R, const glm::vec3& q, const AreaLight& light,
-                            float h) {
-        if (distanceToSegment(c, q, light.centre) >= R + light.boundRadius + 2.f * mRaySlack + h)
-            return false;
-        return distanceBeyondCone(c, q, light.centre, light.boundRadius) <
-               double(R + mRaySlack + h);
-    };
-    const auto between = [&](const Move& m, const glm::vec3& q, const AreaLight& light, float h) {
-        return passes(m.before, m.radiusBefore, q, light, h) ||
-               passes(m.after, m.radiusAfter, q, light, h);
-    };
-    // The (move, light) pairs, as m * lights + l, that pass for every x within h of q.
+    // Per point: the distance to the nearest moved mobile that may stand between it and a
+    // light (old or new pose; +inf where none may). Each such light is marked stale for the
+    // point: its recorded samples no longer hold.
     const std::size_t lights = mLights.size();
-    const auto passingPairs = [&](const glm::vec3& q, float h, std::vector<std::uint32_t>& out) {
-        out.clear();
-        for (std::size_t m = 0; m < moves.size(); ++m)
-            for (std::size_t l = 0; l < lights; ++l)
-                if (between(moves[m], q, mLights[l], h))
-                    out.push_back(std::uint32_t(m * lights + l));
-    };
-    // Candidates without visiting every point: blocks of kCullBlock^3 grid cells, then their
-    // cells, each tested by its bounding sphere; then the points listed in passing cells (a
-    // point is listed in the cell holding its position, among others).
-    const PointGrid& grid = cache.grid;
-    const glm::ivec3 dims = grid.dims();
-    const float cell = grid.cellSize();
-    const glm::ivec3 blocks = (dims + kCullBlock - 1) / kCullBlock;
-    const std::size_t blockCount = std::size_t(blocks.x) * blocks.y * blocks.z;
-    std::vector<std::vector<std::uint32_t>> passing(blockCount);
-    tbb::parallel_for(std::size_t(0), blockCount, [&](std::size_t b) {
-        const glm::ivec3 bi(int(b % blocks.x), int(b / blocks.x % blocks.y),
-                            int(b / (std::size_t(blocks.x) * blocks.y)));
-        const glm::ivec3 lo = bi * kCullBlock, hi = glm::min(lo + kCullBlock, dims);
-        const glm::vec3 size = glm::vec3(hi - lo) * cell;
-        const glm::vec3 corner = grid.origin() + glm::vec3(lo) * cell;
-        // A cell's ball lies inside its block's, so a pair the block fails every cell fails:
-        // the cells test only the block's passing pairs.
-        std::vector<std::uint32_t> pairs;
-        passingPairs(corner + 0.5f * size, 0.5f * glm::length(size), pairs);
-        if (pairs.empty()) return;
-        const float h = 0.5f * std::sqrt(3.f) * cell;
-        const auto mayShadow = [&](const glm::vec3& centre) {
-            for (const std::uint32_t pair : pairs)
-                if (between(moves[pair / lights], centre, mLights[pair % lights], h)) return true;
-            return false;
-        };
-        for (int k = lo.z; k < hi.z; ++k)
-            for (int j = lo.y; j < hi.y; ++j)
-                for (int i = lo.x; i < hi.x; ++i) {
-                    const std::uint32_t c = std::uint32_t((k * dims.y + j) * dims.x + i);
-                    if (grid.cellStart()[c] == grid.cellStart()[c + 1]) continue;
-                    const glm::vec3 centre = grid.origin() + (glm::vec3(i, j, k) + 0.5f) * cell;
-                    if (mayShadow(centre)) passing[b].push_back(c);
-                }
-    });
-    mCandidates.clear();
-    for (const auto& cells : passing)
-        for (const std::uint32_t c : cells)
-            for (std::uint32_t e = grid.cellStart()[c]; e < grid.cellStart()[c + 1]; ++e) {
-                const std::uint32_t p = grid.cellPoints()[e];
-                if (mCandidateFlag[p]) continue;
-                mCandidateFlag[p] = 1;
-                mCandidates.push_back(p);
-            }
-    mStats.shadowCandidates = mCandidates.size();
-    // Per candidate: the distance to the nearest moved mobile when a moved mobile (old or new
-    // pose) may stand between it and a light; +inf otherwise. Each such light is marked
-    // stale for the point: its recorded samples no longer hold.
     std::vector<float> key(cache.size(), std::numeric_limits<float>::infinity());
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, mCandidates.size(), 256),
-        [&](const tbb::blocked_range<std::size_t>& range) {
-            for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                const std::uint32_t p = mCandidates[i];
-                const glm::vec3 x = cache.position[p], n = cache.normal[p];
-                for (const Move& m : moves) {
-                    bool near = false;
-                    for (std::size_t l = 0; l < lights; ++l) {
-                        const AreaLight& light = mLights[l];
-                        // A light wholly below the point's horizon adds nothing, mobile or not.
-                        if (glm::dot(n, light.centre - x) < -light.boundRadius) continue;
-                        if (between(m, x, light, 0.f)) {
-                            near = true;
-                            if (cache.sampleWords > 0) mLightStale[std::size_t(p) * lights + l] = 1;
-                        }
-                    }
-                    if (near)
-                        key[p] =
-                            std::min({key[p], glm::length(m.after - x), glm::length(m.before - x)});
-                }
-            }
-        });
-    for (const std::uint32_t p : mCandidates)
-        mCandidateFlag[p] = 0;
+    mStats.shadowCandidates =
+        forEachShadowedPair(cache.grid, cache.position, cache.normal, mLights, moves, mRaySlack,
+                            [&](std::uint32_t p, std::uint32_t m, std::uint32_t l) {
+                                const glm::vec3 x = cache.position[p];
+                                if (cache.sampleWords > 0)
+                                    mLightStale[std::size_t(p) * lights + l] = 1;
+                                key[p] = std::min({key[p], glm::length(moves[m].after - x),
+                                                   glm::length(moves[m].before - x)});
+                            });
     for (std::size_t p = 0; p < cache.size(); ++p) {
         if (!std::isfinite(key[p])) continue;
         if (!mQueuedFlag[p]) {

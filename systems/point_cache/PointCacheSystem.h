@@ -60,6 +60,7 @@ public:
     struct FrameStats {
         bool fullIndirect = false;       ///< every point's indirect re-estimated
         std::size_t deltaSegments = 0;   ///< delta segments traced against the point discs
+        std::size_t discCrossings = 0;   ///< (segment, point disc) crossings they made
         std::size_t indirectWritten = 0; ///< points whose indirect value changed
         std::size_t shadowCandidates = 0; ///< points tested against the moved mobiles
         std::size_t queued = 0;          ///< points newly queued for soft-shadow refresh
@@ -124,8 +125,6 @@ private:
     std::unordered_map<Entity, MobileBound> mMobiles;
 
     std::vector<std::uint8_t> mQueuedFlag; ///< per point
-    std::vector<std::uint32_t> mCandidates;   ///< frame scratch: points tested in queueShadowed
-    std::vector<std::uint8_t> mCandidateFlag; ///< per point, all 0 between frames
     std::vector<float> mQueueKey;          ///< per point: distance to the mobile when queued
     std::vector<std::uint32_t> mQueue;
 

@@ -26,6 +26,8 @@ void PointGrid::build(std::span<const glm::vec3> positions, std::span<const glm:
     mRadii.assign(searchRadii.begin(), searchRadii.end());
     mCellStart.clear();
     mCellPoints.clear();
+    mHeldBy.clear();
+    mHeldPoints.clear();
     mDims = glm::ivec3(0);
     if (positions.empty()) return;
 
@@ -85,6 +87,26 @@ void PointGrid::build(std::span<const glm::vec3> positions, std::span<const glm:
     std::vector<std::uint32_t> cursor(mCellStart.begin(), mCellStart.end() - 1);
     for (std::size_t p = 0; p < positions.size(); ++p)
         forEachCell(p, [&](std::size_t c) { mCellPoints[cursor[c]++] = std::uint32_t(p); });
+
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> held(positions.size());
+    for (std::size_t p = 0; p < positions.size(); ++p) {
+        const std::int64_t c = cellOf(mPositions[p]);
+        QGI_ASSERT(c >= 0, "point ", p, " lies outside the grid built around it");
+        held[p] = {std::uint32_t(c), std::uint32_t(p)};
+    }
+    std::sort(held.begin(), held.end());
+    mHeldBy.resize(held.size());
+    mHeldPoints.resize(held.size());
+    for (std::size_t i = 0; i < held.size(); ++i) {
+        mHeldBy[i] = held[i].first;
+        mHeldPoints[i] = held[i].second;
+    }
+}
+
+std::span<const std::uint32_t> PointGrid::pointsHeldBy(std::uint32_t cell) const {
+    const auto [first, last] = std::equal_range(mHeldBy.begin(), mHeldBy.end(), cell);
+    return std::span<const std::uint32_t>(mHeldPoints)
+        .subspan(std::size_t(first - mHeldBy.begin()), std::size_t(last - first));
 }
 
 float PointGrid::distanceTo(std::uint32_t p, const glm::vec3& x) const {
@@ -99,16 +121,22 @@ bool PointGrid::inRange(std::uint32_t p, const glm::vec3& x, const glm::vec3& n)
     return std::abs(glm::dot(mNormals[p], offset)) <= mParams.planeTolerance * r;
 }
 
-std::span<const std::uint32_t> PointGrid::candidates(const glm::vec3& x) const {
-    if (mCellStart.empty()) return {};
+std::int64_t PointGrid::cellOf(const glm::vec3& x) const {
+    if (mCellStart.empty()) return -1;
     const glm::vec3 cell = glm::floor((x - mOrigin) / mCellSize);
     if (!(cell.x >= 0.f && cell.y >= 0.f && cell.z >= 0.f && cell.x < float(mDims.x) &&
           cell.y < float(mDims.y) && cell.z < float(mDims.z)))
-        return {};
+        return -1;
     const glm::ivec3 c(cell);
-    const std::size_t index = std::size_t((c.z * mDims.y + c.y) * mDims.x + c.x);
+    return (std::int64_t(c.z) * mDims.y + c.y) * mDims.x + c.x;
+}
+
+std::span<const std::uint32_t> PointGrid::candidates(const glm::vec3& x) const {
+    const std::int64_t index = cellOf(x);
+    if (index < 0) return {};
     return std::span<const std::uint32_t>(mCellPoints)
-        .subspan(mCellStart[index], mCellStart[index + 1] - mCellStart[index]);
+        .subspan(mCellStart[std::size_t(index)],
+                 mCellStart[std::size_t(index) + 1] - mCellStart[std::size_t(index)]);
 }
 
 } // namespace qgi

@@ -40,6 +40,12 @@ public:
     /// Candidates of the cell holding x (a superset of the points in range); empty outside
     /// the grid.
     std::span<const std::uint32_t> candidates(const glm::vec3& x) const;
+    /// Index of the cell holding x, or -1 outside the grid. Every point is listed in the cell
+    /// holding its position.
+    std::int64_t cellOf(const glm::vec3& x) const;
+    /// The points whose position cell c holds (each point lies in one cell), in increasing
+    /// order: a walk over cells that visits each point once.
+    std::span<const std::uint32_t> pointsHeldBy(std::uint32_t cell) const;
 
     /// Calls f(point, distance) for every point in range of x, in increasing point order.
     template <typename F> void forEachInRange(const glm::vec3& x, const glm::vec3& n, F&& f) const {
@@ -70,6 +76,9 @@ private:
     std::vector<glm::vec3> mPositions, mNormals;
     std::vector<float> mRadii;
     std::vector<std::uint32_t> mCellStart, mCellPoints;
+    /// Every point by the cell holding its position: mHeldBy[i] is cellOf(position of
+    /// mHeldPoints[i]), both sorted by (cell, point).
+    std::vector<std::uint32_t> mHeldBy, mHeldPoints;
 };
 
 } // namespace qgi

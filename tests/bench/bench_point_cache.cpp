@@ -8,7 +8,9 @@
 //  - UpdateMovingMobile: the `point.cache` frame while the crate in the court moves 5 cm per
 //    frame (the photon update runs untimed before it), at the default budget; counters: delta
 //    segments, points queued and refreshed, and of the refreshed points' (point, light)
-//    pairs those traced with shadow rays and those replayed from their recorded samples.
+//    pairs those traced with shadow rays and those replayed from their recorded samples;
+//  - UpdateWalkthrough: the same frame while the scene's own paths move its mobiles, as in
+//    the demo's walkthrough (the first 4 s at 30 frames a second), same counters.
 #include "components/Mesh.h"
 #include "components/MobileMesh.h"
 #include "components/Name.h"
@@ -18,10 +20,12 @@
 #include "runtime/ecs/Registry.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/BuiltinScenes.h"
+#include "systems/animation/AnimationSystem.h"
 #include "systems/photon_update/PhotonUpdateSystem.h"
 #include "systems/point_cache/PointCache.h"
 #include "systems/point_cache/PointCacheSystem.h"
 #include "systems/point_cache/PointShading.h"
+#include "systems/transform/TransformSystem.h"
 
 #include <benchmark/benchmark.h>
 #include <glm/gtc/matrix_transform.hpp>
@@ -179,30 +183,14 @@ void BM_Coverage(benchmark::State& state) {
 }
 BENCHMARK(BM_Coverage)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
-void BM_UpdateMovingMobile(benchmark::State& state) {
-    Atrium& w = atrium();
-    w.builtCache();
-    if (!w.photons) {
-        w.photons = std::make_unique<PhotonUpdateSystem>(PhotonSettings{});
-        w.photons->update(w.registry, FrameContext{w.frame, 0.0, 0.f, 0});
-        w.cache->update(w.registry, FrameContext{w.frame++, 0.0, 0.f, 0});
-        w.registry.clearChanges();
-    }
-    double segments = 0, queued = 0, refreshed = 0, candidates = 0, indirectMs = 0, queueMs = 0,
-           refreshMs = 0, traced = 0, replayed = 0;
-    for (auto _ : state) {
-        state.PauseTiming();
-        const float x = 0.05f * float(w.frame % 40 < 20 ? w.frame % 20 : 20 - w.frame % 20);
-        w.registry.patch<WorldTransform>(w.crate).matrix =
-            glm::translate(glm::mat4(1.f), glm::vec3(x, 0.f, 0.f)) * w.rest;
-        w.registry.ctx().get<RayScene>().syncMoved(w.registry);
-        w.photons->update(w.registry, FrameContext{w.frame, 0.0, 0.f, 0});
-        state.ResumeTiming();
-        w.cache->update(w.registry, FrameContext{w.frame++, 0.0, 0.f, 0});
-        state.PauseTiming();
-        w.registry.clearChanges();
-        const auto& s = w.cache->lastFrame();
+/// The per-frame counters of the update benchmarks, averaged over the timed frames.
+struct FrameTotals {
+    double segments = 0, crossings = 0, queued = 0, refreshed = 0, candidates = 0, indirectMs = 0,
+           queueMs = 0, refreshMs = 0, traced = 0, replayed = 0, frames = 0;
+
+    void add(const PointCacheSystem::FrameStats& s) {
         segments += double(s.deltaSegments);
+        crossings += double(s.discCrossings);
         queued += double(s.queued);
         refreshed += double(s.refreshed);
         traced += double(s.lightsTraced);
@@ -211,20 +199,79 @@ void BM_UpdateMovingMobile(benchmark::State& state) {
         indirectMs += s.indirectMs;
         queueMs += s.queueMs;
         refreshMs += s.refreshMs;
+        ++frames;
+    }
+    void report(benchmark::State& state) const {
+        const double n = std::max(frames, 1.0);
+        state.counters["deltaSegments"] = segments / n;
+        state.counters["discCrossings"] = crossings / n;
+        state.counters["queued"] = queued / n;
+        state.counters["refreshed"] = refreshed / n;
+        state.counters["lightsTraced"] = traced / n;
+        state.counters["lightsReplayed"] = replayed / n;
+        state.counters["shadowCandidates"] = candidates / n;
+        state.counters["indirect_ms"] = indirectMs / n;
+        state.counters["queue_ms"] = queueMs / n;
+        state.counters["refresh_ms"] = refreshMs / n;
+    }
+};
+
+/// The photon update, untimed, then the timed point-cache frame.
+void timedFrame(benchmark::State& state, Atrium& w, FrameTotals& totals, double time = 0.0) {
+    w.registry.ctx().get<RayScene>().syncMoved(w.registry);
+    w.photons->update(w.registry, FrameContext{w.frame, time, 0.f, 0});
+    state.ResumeTiming();
+    w.cache->update(w.registry, FrameContext{w.frame++, time, 0.f, 0});
+    state.PauseTiming();
+    w.registry.clearChanges();
+    totals.add(w.cache->lastFrame());
+}
+
+void startPhotons(Atrium& w) {
+    w.builtCache();
+    if (w.photons) return;
+    w.photons = std::make_unique<PhotonUpdateSystem>(PhotonSettings{});
+    w.photons->update(w.registry, FrameContext{w.frame, 0.0, 0.f, 0});
+    w.cache->update(w.registry, FrameContext{w.frame++, 0.0, 0.f, 0});
+    w.registry.clearChanges();
+}
+
+void BM_UpdateMovingMobile(benchmark::State& state) {
+    Atrium& w = atrium();
+    startPhotons(w);
+    FrameTotals totals;
+    for (auto _ : state) {
+        state.PauseTiming();
+        const float x = 0.05f * float(w.frame % 40 < 20 ? w.frame % 20 : 20 - w.frame % 20);
+        w.registry.patch<WorldTransform>(w.crate).matrix =
+            glm::translate(glm::mat4(1.f), glm::vec3(x, 0.f, 0.f)) * w.rest;
+        timedFrame(state, w, totals);
         state.ResumeTiming();
     }
-    const double n = double(state.iterations());
-    state.counters["deltaSegments"] = segments / n;
-    state.counters["queued"] = queued / n;
-    state.counters["refreshed"] = refreshed / n;
-    state.counters["lightsTraced"] = traced / n;
-    state.counters["lightsReplayed"] = replayed / n;
-    state.counters["shadowCandidates"] = candidates / n;
-    state.counters["indirect_ms"] = indirectMs / n;
-    state.counters["queue_ms"] = queueMs / n;
-    state.counters["refresh_ms"] = refreshMs / n;
+    totals.report(state);
 }
 BENCHMARK(BM_UpdateMovingMobile)->Unit(benchmark::kMillisecond)->Iterations(40);
+
+/// The demo's walkthrough: the scene's own paths move its mobiles (the animation and
+/// transform systems run untimed), 30 frames a second from the start.
+void BM_UpdateWalkthrough(benchmark::State& state) {
+    Atrium& w = atrium();
+    startPhotons(w);
+    AnimationSystem animation;
+    TransformSystem transforms;
+    FrameTotals totals;
+    std::uint64_t step = 0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        const double time = double(step++) / 30.0;
+        animation.update(w.registry, FrameContext{w.frame, time, 1.f / 30.f, 0});
+        transforms.update(w.registry, FrameContext{w.frame, time, 1.f / 30.f, 0});
+        timedFrame(state, w, totals, time);
+        state.ResumeTiming();
+    }
+    totals.report(state);
+}
+BENCHMARK(BM_UpdateWalkthrough)->Unit(benchmark::kMillisecond)->Iterations(120);
 
 } // namespace
 } // namespace qgi

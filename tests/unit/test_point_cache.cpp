@@ -15,6 +15,7 @@
 #include "systems/point_cache/PointCacheSystem.h"
 #include "systems/point_cache/PointSetBuilder.h"
 #include "systems/point_cache/PointShading.h"
+#include "systems/point_cache/ShadowCandidates.h"
 #include "test_meshes.h"
 #include "test_photon_scenes.h"
 
@@ -428,7 +429,85 @@ TEST(PointCacheQuery, GridFindsExactlyWhatBruteForceFinds) {
             nonEmpty += expected.empty() ? 0 : 1;
         }
         EXPECT_GT(nonEmpty, 1000u);
+        // The cell holding a point lists it (the shadow queue walks points by that cell), and
+        // a position outside the grid has no cell.
+        for (std::uint32_t p = 0; p < cache.size(); ++p) {
+            const std::int64_t c = cache.grid.cellOf(cache.position[p]);
+            ASSERT_GE(c, 0) << "point " << p;
+            const std::span<const std::uint32_t> listed = cache.grid.candidates(cache.position[p]);
+            ASSERT_TRUE(std::find(listed.begin(), listed.end(), p) != listed.end())
+                << "point " << p << " cell " << cell;
+        }
+        EXPECT_EQ(cache.grid.cellOf(cache.grid.origin() - glm::vec3(1.f)), -1);
     }
+}
+
+TEST(ShadowCandidates, TheCulledWalkFindsExactlyWhatTestingEveryPointFinds) {
+    // Random area-light balls (one below the floor, behind every point's horizon) and random
+    // mobile steps, short (one ball holds both poses) and long, over the synthetic points at
+    // three grid cell sizes: the walk over blocks and cells must give every point exactly the
+    // (move, light) pairs mayShadow() gives it, in that order, while testing fewer points.
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    const auto in = [&](float lo, float hi) { return lo + (hi - lo) * u(rng); };
+    std::size_t found = 0, culled = 0, mergedMoves = 0;
+    for (const float cellSize : {0.f, 0.07f, 0.9f}) {
+        PointCache cache = syntheticCache(3000, 7);
+        cache.settings.gridCellSize = cellSize;
+        cache.buildGrid();
+        for (int trial = 0; trial < 40; ++trial) {
+            std::vector<AreaLight> lights(4);
+            for (AreaLight& l : lights) {
+                l.centre = {in(-3.f, 3.f), in(0.8f, 3.f), in(-3.f, 3.f)};
+                l.boundRadius = in(0.05f, 1.f);
+            }
+            lights[3].centre.y = -1.5f;
+            lights[3].boundRadius = 0.5f;
+            std::vector<MobileMove> moves;
+            for (int m = 0, count = 1 + trial % 3; m < count; ++m) {
+                const glm::vec3 before(in(-2.f, 2.f), in(0.05f, 1.f), in(-2.f, 2.f));
+                const float radius = in(0.05f, 0.4f);
+                const float step = (trial + m) % 2 == 0 ? in(0.f, 2.f * radius) : in(1.f, 3.f);
+                const glm::vec3 direction =
+                    glm::normalize(glm::vec3(in(-1.f, 1.f), in(-0.3f, 0.3f), in(-1.f, 1.f)));
+                moves.push_back(MobileMove::make(before, radius, before + step * direction,
+                                                 radius * in(0.8f, 1.2f)));
+                const MobileMove& mm = moves.back();
+                if (mm.merged) {
+                    ++mergedMoves;
+                    // The one ball holds both poses' balls.
+                    EXPECT_LE(glm::length(mm.middle - mm.before) + mm.radiusBefore, mm.radiusBoth);
+                    EXPECT_LE(glm::length(mm.middle - mm.after) + mm.radiusAfter, mm.radiusBoth);
+                }
+            }
+            const float raySlack = 1e-3f;
+            std::vector<std::vector<std::uint64_t>> got(cache.size());
+            const std::size_t tested = forEachShadowedPair(
+                cache.grid, cache.position, cache.normal, lights, moves, raySlack,
+                [&](std::uint32_t p, std::uint32_t m, std::uint32_t l) {
+                    got[p].push_back(std::uint64_t(m) << 32 | l);
+                });
+            std::size_t pairs = 0;
+            for (std::uint32_t p = 0; p < cache.size(); ++p) {
+                std::vector<std::uint64_t> expected;
+                for (std::uint32_t m = 0; m < moves.size(); ++m)
+                    for (std::uint32_t l = 0; l < lights.size(); ++l)
+                        if (mayShadow(moves[m], cache.position[p], cache.normal[p], lights[l],
+                                      raySlack))
+                            expected.push_back(std::uint64_t(m) << 32 | l);
+                ASSERT_EQ(got[p], expected)
+                    << "point " << p << ", cell " << cellSize << ", trial " << trial;
+                pairs += expected.size();
+            }
+            found += pairs;
+            culled += tested < cache.size() ? 1 : 0;
+            EXPECT_GE(tested, std::size_t(std::count_if(got.begin(), got.end(),
+                                                        [](const auto& g) { return !g.empty(); })));
+        }
+    }
+    EXPECT_GT(found, 1000u);     // the moves do shadow points
+    EXPECT_GT(culled, 60u);      // and the walk leaves points untested
+    EXPECT_GT(mergedMoves, 50u); // both kinds of move were drawn
 }
 
 TEST(PointCacheQuery, BlendIsTheFalloffWeightedMeanOfThePointsInRange) {
