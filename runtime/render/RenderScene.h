@@ -67,20 +67,11 @@ struct VlfGpuTables {
     std::vector<glm::ivec4> blocks;     ///< per (face, direction): two ivec4, see vlf.glsl
     std::vector<std::int32_t> slots;    ///< tile id or -1
     /// Per tile cell (tile-major, m x m row-major), 8 bytes each: RGB radiance / cellScale as
-    /// half floats, and A 1 where the cell holds a value, 0 where it holds none
-    /// (packVlfCells).
+    /// half floats, and A 1 where the cell holds a value, 0 where it holds none (the baked
+    /// Vlf's cells as it keeps them, vlf::packCells).
     std::vector<glm::u16vec4> cells;
     float cellScale = 1.f; ///< a power of two; the shader multiplies the cells by it
 };
-
-/// The baked cells (RGB radiance, W/(m^2 sr), and a weight that is positive where the cell
-/// holds a value) as VlfGpuTables holds them. The scale is the smallest power of two, at least
-/// 1, that brings the largest component to 16384 or less, so no value overflows a half float
-/// (65504) and dividing by it rounds nothing; each value then rounds to the nearest half, within
-/// 2^-11 of itself (a normal half; a value under 2^-14 times the scale, to within 2^-25 times
-/// the scale). A component that is negative or not a finite number is stored as 0.
-/// Returns the scale.
-float packVlfCells(std::span<const glm::vec4> cells, std::vector<glm::u16vec4>& out);
 
 enum class LightType : std::uint8_t { Point, Spot, Directional };
 

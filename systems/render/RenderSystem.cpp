@@ -199,7 +199,8 @@ const VlfGpuTables* RenderSystem::vlfTables(const Registry& registry) {
         t.blocks.emplace_back(b.tw, std::int32_t(b.firstSlot), 0, 0);
     }
     t.slots = v.slots();
-    t.cellScale = packVlfCells(v.tiles(), t.cells);
+    t.cells = v.cells();
+    t.cellScale = v.cellScale();
     mVlf = std::move(t);
     mVlfSource = field;
     mVlfKey = v.key();

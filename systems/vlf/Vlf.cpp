@@ -4,6 +4,7 @@
 #include "runtime/core/Hash.h"
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/packing.hpp>
 #include <glm/vec2.hpp>
 #include <unistd.h>
 
@@ -13,6 +14,30 @@
 #include <limits>
 
 namespace qgi::vlf {
+
+float packCells(std::span<const glm::vec4> cells, std::vector<glm::u16vec4>& out) {
+    constexpr float kLargest = 16384.f; // a quarter of the largest half float
+    const auto usable = [](float v) { return std::isfinite(v) && v > 0.f ? v : 0.f; };
+    float largest = 0.f;
+    for (const glm::vec4& c : cells)
+        largest = std::max({largest, usable(c.x), usable(c.y), usable(c.z)});
+    float scale = 1.f;
+    while (largest / scale > kLargest)
+        scale *= 2.f;
+    const std::uint16_t one = glm::packHalf1x16(1.f);
+    out.resize(cells.size());
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+        const glm::vec4& c = cells[i];
+        out[i] = {glm::packHalf1x16(usable(c.x) / scale), glm::packHalf1x16(usable(c.y) / scale),
+                  glm::packHalf1x16(usable(c.z) / scale), c.w > 0.f ? one : std::uint16_t(0)};
+    }
+    return scale;
+}
+
+glm::vec4 unpackCell(const glm::u16vec4& cell, float scale) {
+    return {glm::unpackHalf1x16(cell.x) * scale, glm::unpackHalf1x16(cell.y) * scale,
+            glm::unpackHalf1x16(cell.z) * scale, glm::unpackHalf1x16(cell.w)};
+}
 namespace {
 
 /// Separating-axis test of a 2D triangle against the box [lo, hi].
@@ -242,7 +267,7 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     }
     const VlfMemory need = v.memory();
     if (limit > 0.0 && double(need.bakeBytes) > limit) tooBig(double(need.bakeBytes));
-    v.mTiles.assign(v.mTileCount * std::size_t(m) * m, glm::vec4(0.f));
+    v.mCells.assign(v.mTileCount * std::size_t(m) * m, glm::u16vec4(0));
     return v;
 }
 
@@ -305,14 +330,15 @@ VlfMemory Vlf::memory() const {
                               mBlocks.size() * sizeof(TileBlock) +
                               mFaceMaps.size() * sizeof(FaceMap) + mCoverage.size() * sizeof(float);
     mem.renderBytes =
-        mem.tileCells * sizeof(glm::vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
-    // The bake adds, per cell: unshot, next and incident (RGB) plus the incident weight and the
-    // incident total for mirrors (RGBA); per texel: unshot and received irradiance, and one
-    // accumulation copy per work chunk.
+        mem.tileCells * sizeof(glm::u16vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
+    // The bake adds, per cell: the float cells it packs at the end (RGBA), unshot, next and
+    // incident (RGB) plus the incident weight and the incident total for mirrors (RGBA); per
+    // texel: unshot and received irradiance, and one accumulation copy per work chunk.
     const std::size_t chunks = std::min(kBakeChunks, mem.directions);
-    mem.bakeBytes = mem.renderBytes +
-                    mem.tileCells * (3 * sizeof(glm::vec3) + sizeof(float) + sizeof(glm::vec4)) +
-                    mem.diffuseTexels * (2 + chunks) * sizeof(glm::vec3);
+    mem.bakeBytes =
+        mem.renderBytes +
+        mem.tileCells * (2 * sizeof(glm::vec4) + 3 * sizeof(glm::vec3) + sizeof(float)) +
+        mem.diffuseTexels * (2 + chunks) * sizeof(glm::vec3);
     return mem;
 }
 
@@ -346,8 +372,21 @@ glm::vec3 Vlf::diffuseRadiance(std::uint32_t face, const glm::vec3& x) const {
     return f.emission + f.diffuse * kInvPi * sampleTexels(mIrradiance, face, x);
 }
 
-glm::vec3 Vlf::sampleCells(const std::vector<glm::vec4>& cells, std::size_t sf, std::size_t psf,
-                           const glm::vec3& x, float& wOut) const {
+std::vector<glm::vec4> Vlf::unpackedCells() const {
+    std::vector<glm::vec4> out(mCells.size());
+    for (std::size_t i = 0; i < mCells.size(); ++i)
+        out[i] = unpackCell(mCells[i], mCellScale);
+    return out;
+}
+
+void Vlf::storeCells(std::span<const glm::vec4> cells) {
+    QGI_ASSERT(cells.size() == mCells.size(), "one value per cell");
+    mCellScale = packCells(cells, mCells);
+}
+
+template <typename Cells>
+glm::vec3 Vlf::sampleCells(const Cells& cells, std::size_t sf, std::size_t psf, const glm::vec3& x,
+                           float& wOut) const {
     const float h = cellWidth();
     const glm::vec2 c = (project(psf, x) + 1.f) / h - 0.5f;
     const int i0 = floorIndex(c.x), j0 = floorIndex(c.y);
@@ -362,15 +401,18 @@ glm::vec3 Vlf::sampleCells(const std::vector<glm::vec4>& cells, std::size_t sf, 
             const float w = (di ? ax : 1.f - ax) * (dj ? ay : 1.f - ay);
             if (w <= 0.f) continue;
             const std::int64_t k = cellIndex(sf, psf, i0 + di, j0 + dj);
-            if (k < 0 || cells[std::size_t(k)].w <= 0.f) continue;
-            sum += w * glm::vec3(cells[std::size_t(k)]);
+            if (k < 0) continue;
+            const glm::vec4 cell = cells[std::size_t(k)];
+            if (cell.w <= 0.f) continue;
+            sum += w * glm::vec3(cell);
             wsum += w;
         }
     wOut = wsum;
     return wsum > 0.f ? sum / wsum : glm::vec3(0.f);
 }
 
-std::optional<glm::vec3> Vlf::lookupTiles(const std::vector<glm::vec4>& cells, std::uint32_t face,
+template <typename Cells>
+std::optional<glm::vec3> Vlf::lookupTiles(const Cells& cells, std::uint32_t face,
                                           const glm::vec3& x, const glm::vec3& dir) const {
     const std::int32_t sf = mSpecularIndex[face];
     if (sf < 0) return std::nullopt;
@@ -398,19 +440,29 @@ glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x, const gl
                                 const std::vector<glm::vec4>* cells) const {
     const Face& f = mFaces[face];
     if (!f.isSpecular()) return glm::vec3(0.f);
-    const std::vector<glm::vec4>& tiles = cells ? *cells : mTiles;
+    const auto lookup = [&](const glm::vec3& dir) {
+        return cells ? lookupTiles(*cells, face, x, dir) : lookupTiles(cellView(), face, x, dir);
+    };
     std::optional<glm::vec3> value;
     if (f.isMirror()) {
         // Tiles hold incident light, indexed by the front-side direction it arrives from:
         // what the viewer sees arrives from the reflected view direction.
-        const glm::vec3 from = 2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer;
-        value = lookupTiles(tiles, face, x, from);
+        value = lookup(2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer);
         if (value) *value *= f.specular;
     } else {
-        value = lookupTiles(tiles, face, x, toViewer);
+        value = lookup(toViewer);
     }
     return value.value_or(glm::vec3(0.f));
 }
+
+template glm::vec3 Vlf::sampleCells(const std::vector<glm::vec4>&, std::size_t, std::size_t,
+                                    const glm::vec3&, float&) const;
+template glm::vec3 Vlf::sampleCells(const PackedCellView&, std::size_t, std::size_t,
+                                    const glm::vec3&, float&) const;
+template std::optional<glm::vec3> Vlf::lookupTiles(const std::vector<glm::vec4>&, std::uint32_t,
+                                                   const glm::vec3&, const glm::vec3&) const;
+template std::optional<glm::vec3> Vlf::lookupTiles(const PackedCellView&, std::uint32_t,
+                                                   const glm::vec3&, const glm::vec3&) const;
 
 glm::vec3 Vlf::radiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer) const {
     return diffuseRadiance(face, x) + specularRadiance(face, x, toViewer);

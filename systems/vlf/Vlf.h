@@ -4,6 +4,7 @@
 #include "systems/vlf/VlfScene.h"
 #include "systems/vlf/VlfSettings.h"
 
+#include <glm/gtc/type_precision.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
@@ -11,6 +12,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <vector>
 
 namespace qgi::vlf {
@@ -58,13 +60,33 @@ struct TileBlock {
 /// the thread count or scheduling.
 inline constexpr std::size_t kBakeChunks = 16;
 
+/** The baked cells as a Vlf keeps them, and as VlfGpuTables uploads them: 8 bytes each, RGB
+ *  radiance / scale as half floats and A 1 where the cell holds a value, 0 where it holds none.
+ *  The scale is the smallest power of two, at least 1, that brings the largest component to
+ *  16384 or less, so no value overflows a half float (65504) and dividing by it rounds nothing;
+ *  each value then rounds to the nearest half, within 2^-11 of itself (a normal half; a value
+ *  under 2^-14 times the scale, to within 2^-25 times the scale). A component that is negative
+ *  or not a finite number is stored as 0. `cells` are RGB radiance (W/(m^2 sr)) and a weight
+ *  that is positive where the cell holds a value. Returns the scale. */
+float packCells(std::span<const glm::vec4> cells, std::vector<glm::u16vec4>& out);
+/// A packed cell as RGB radiance and weight (1 or 0).
+glm::vec4 unpackCell(const glm::u16vec4& cell, float scale);
+
+/// A baked Vlf's packed cells read as RGB radiance and weight, like a std::vector<glm::vec4> of
+/// them: what the lookups take (sampleCells, lookupTiles).
+struct PackedCellView {
+    const glm::u16vec4* cells = nullptr;
+    float scale = 1.f;
+    glm::vec4 operator[](std::size_t i) const { return unpackCell(cells[i], scale); }
+};
+
 /// Memory of the structure (seed 002 section 1.7 of the digest): element counts and bytes.
 struct VlfMemory {
     std::size_t directions = 0;
     std::size_t tiles = 0;         ///< allocated m x m tiles over all specular faces and PSFs
     std::size_t tileCells = 0;     ///< tiles * m^2: directional elements
     std::size_t diffuseTexels = 0; ///< irradiance-map texels over all faces
-    std::size_t renderBytes = 0;   ///< what lookups keep: RGBA float per cell and texel, index
+    std::size_t renderBytes = 0;   ///< what lookups keep: packed cells, RGB float texels, index
     std::size_t bakeBytes = 0;     ///< peak during the bake: the bake's extra copies on top
 };
 
@@ -134,9 +156,17 @@ public:
     std::size_t tileCount() const { return mTileCount; }
     /// Index of cell (i, j) in the per-cell arrays, or -1 when its tile is not allocated.
     std::int64_t cellIndex(std::size_t sf, std::size_t psf, int i, int j) const;
-    /// Per-cell render table: RGB radiance and a weight (> 0 where the cell holds a value).
-    const std::vector<glm::vec4>& tiles() const { return mTiles; }
-    std::vector<glm::vec4>& tiles() { return mTiles; }
+    /// Cells over all tiles: tileCount() * m^2.
+    std::size_t cellCount() const { return mCells.size(); }
+    /// Per-cell render table, packed (packCells): RGB radiance and whether the cell holds a
+    /// value. Stored by the bake (storeCells) or read from the cache.
+    const std::vector<glm::u16vec4>& cells() const { return mCells; }
+    float cellScale() const { return mCellScale; }
+    PackedCellView cellView() const { return {mCells.data(), mCellScale}; }
+    /// The cells as floats (a copy, for tools and tests).
+    std::vector<glm::vec4> unpackedCells() const;
+    /// Packs `cells` (RGB radiance and weight, cellCount() of them) into the render table.
+    void storeCells(std::span<const glm::vec4> cells);
     const std::vector<std::int32_t>& slots() const { return mSlots; }
     const std::vector<TileBlock>& blocks() const { return mBlocks; }
 
@@ -153,19 +183,21 @@ public:
     /// Bilinear value of per-cell `cells` (RGB + weight) of specular face sf in subfield psf at
     /// world x: weights renormalised over the cells that hold a value. Returns the summed
     /// weight in w (0 where nothing is there).
-    glm::vec3 sampleCells(const std::vector<glm::vec4>& cells, std::size_t sf, std::size_t psf,
-                          const glm::vec3& x, float& w) const;
+    /// `cells`: a std::vector<glm::vec4> (the bake's working copies) or a PackedCellView.
+    template <typename Cells>
+    glm::vec3 sampleCells(const Cells& cells, std::size_t sf, std::size_t psf, const glm::vec3& x,
+                          float& w) const;
     /// The 12-tap lookup of seed 002 (Eq 4.5): the three subfields around `dir`, a direction
     /// on the face's front side (outgoing for glossy tiles, the direction light arrives from
     /// for mirror tiles), barycentrically weighted, each a bilinear fetch at x; weights
     /// renormalised over the corners where the face has a tile on that side. nullopt where none
     /// has one.
-    std::optional<glm::vec3> lookupTiles(const std::vector<glm::vec4>& cells, std::uint32_t face,
-                                         const glm::vec3& x, const glm::vec3& dir) const;
+    template <typename Cells>
+    std::optional<glm::vec3> lookupTiles(const Cells& cells, std::uint32_t face, const glm::vec3& x,
+                                         const glm::vec3& dir) const;
     /// Specular outgoing radiance of face `face` at x towards unit `toViewer` (zero for a
     /// diffuse face or where no tile covers it). `cells`, when given, stand in for the baked
-    /// tiles (laid out like them): the lookup of a copy the way it is held elsewhere (the
-    /// renderer's half floats, unpacked).
+    /// cells (laid out like them): the lookup of a copy the way it is held elsewhere.
     glm::vec3 specularRadiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer,
                                const std::vector<glm::vec4>* cells = nullptr) const;
     /// diffuseRadiance + specularRadiance.
@@ -189,7 +221,8 @@ private:
     std::vector<TileBlock> mBlocks;
     std::vector<std::int32_t> mSlots;
     std::size_t mTileCount = 0;
-    std::vector<glm::vec4> mTiles;
+    std::vector<glm::u16vec4> mCells;
+    float mCellScale = 1.f;
 };
 
 /// Cache key of a bake: the scene's content hash combined with every setting that changes

@@ -47,7 +47,8 @@ public:
     Baker(const VlfScene& scene, const VlfSettings& settings)
         : mScene(scene), mSettings(settings), mVlf(Vlf::allocate(scene, settings)),
           mDirs(mVlf.directions()) {
-        const std::size_t cells = mVlf.tiles().size();
+        const std::size_t cells = mVlf.cellCount();
+        mTiles.assign(cells, glm::vec4(0.f));
         const std::size_t texels = mVlf.irradiance().size();
         mUnshotE.assign(texels, glm::vec3(0.f));
         mUnshotL.assign(cells, glm::vec3(0.f));
@@ -82,6 +83,7 @@ public:
                        " lines crossed the scene's faces more than ", kMaxLineCrossings,
                        " times; light beyond those crossings is missing from the field");
         if (stats) *stats = local;
+        mVlf.storeCells(mTiles);
         return std::move(mVlf);
     }
 
@@ -253,7 +255,7 @@ private:
                     }
                     const std::size_t c = cellOffset(tile, i, jj, m);
                     mUnshotL[c] = L;
-                    mVlf.tiles()[c] = glm::vec4(L, 1.f);
+                    mTiles[c] = glm::vec4(L, 1.f);
                 });
             }
         });
@@ -478,7 +480,7 @@ private:
                         mNextL[c] = in ? f.specular * *in : glm::vec3(0.f);
                         // Render table of a mirror: the total incident light.
                         if (mIncidentAvg[c].w > 0.f) {
-                            glm::vec4& r = mVlf.tiles()[c];
+                            glm::vec4& r = mTiles[c];
                             r = glm::vec4(glm::vec3(r) + glm::vec3(mIncidentAvg[c]), 1.f);
                         }
                     });
@@ -500,7 +502,7 @@ private:
                     }
                 for (const GatherCell& cell : cells) {
                     const glm::vec3 L = cell.L * f.specular;
-                    glm::vec4& r = mVlf.tiles()[cell.index];
+                    glm::vec4& r = mTiles[cell.index];
                     r = glm::vec4(glm::vec3(r) + L, 1.f);
                     mNextL[cell.index] = L;
                 }
@@ -573,6 +575,8 @@ private:
     const DirectionSet& mDirs;
     std::vector<glm::vec3> mUnshotE, mReceived;
     std::vector<glm::vec3> mUnshotL, mNextL;
+    /// The render table as floats (RGB radiance and weight), packed into the Vlf at the end.
+    std::vector<glm::vec4> mTiles;
     std::vector<glm::vec4> mIncident, mIncidentAvg;
     std::vector<std::vector<std::pair<std::uint32_t, float>>> mLobes;
 };

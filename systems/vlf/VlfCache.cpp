@@ -115,9 +115,14 @@ void checkLoaded(const Vlf& v, const std::string& name) {
         if (v.specularIndex(v.specularFace(sf)) != std::int32_t(sf) ||
             (sf > 0 && v.specularFace(sf) <= v.specularFace(sf - 1)))
             corrupt("specular faces do not match their index");
-    for (const glm::vec4& cell : v.tiles())
-        if (!isColour(glm::vec3(cell)) || !isLength(cell.w))
+    if (!(v.cellScale() >= 1.f) || !std::isfinite(v.cellScale()) ||
+        std::exp2(std::round(std::log2(v.cellScale()))) != v.cellScale())
+        corrupt("the cells' scale is not a power of two of at least 1");
+    for (const glm::u16vec4& packed : v.cells()) {
+        const glm::vec4 cell = unpackCell(packed, 1.f);
+        if (!isColour(glm::vec3(cell)) || !(cell.w == 0.f || cell.w == 1.f))
             corrupt("a tile cell is negative or not finite");
+    }
 }
 
 /// The scene and settings a loaded field was baked for must be these: the key says so
@@ -176,7 +181,8 @@ void VlfCache::save(const Vlf& v, const std::filesystem::path& path) {
     w.putVector(v.mBlocks);
     w.putVector(v.mSlots);
     w.put(std::uint64_t(v.mTileCount));
-    w.putVector(v.mTiles);
+    w.put(v.mCellScale);
+    w.putVector(v.mCells);
 
     Fnv1aHasher h;
     h.addBytes(w.bytes.data(), w.bytes.size());
@@ -282,7 +288,8 @@ Vlf VlfCache::load(const std::filesystem::path& path, const VlfScene& scene,
     v.mSlots = r.getVector<std::int32_t>();
     const std::uint64_t tileCount = r.get<std::uint64_t>();
     const std::size_t cellsPerTile = std::size_t(s.tileSize) * s.tileSize;
-    if (tileCount > (bytes.size() - r.pos) / (cellsPerTile * sizeof(glm::vec4)))
+    if (bytes.size() - r.pos < sizeof(float) ||
+        tileCount > (bytes.size() - r.pos - sizeof(float)) / (cellsPerTile * sizeof(glm::u16vec4)))
         fail(name, ": VLF cache is corrupt (more tiles than the file holds)");
     v.mTileCount = std::size_t(tileCount);
     const std::int64_t n = s.linesPerSide / s.tileSize;
@@ -298,7 +305,8 @@ Vlf VlfCache::load(const std::filesystem::path& path, const VlfScene& scene,
     for (std::int32_t slot : v.mSlots)
         if (slot < -1 || (slot >= 0 && std::size_t(slot) >= v.mTileCount))
             fail(name, ": VLF cache is corrupt (a tile slot is out of range)");
-    v.mTiles = r.getVector<glm::vec4>(v.mTileCount * cellsPerTile);
+    v.mCellScale = r.get<float>();
+    v.mCells = r.getVector<glm::u16vec4>(v.mTileCount * cellsPerTile);
     if (r.pos != bytes.size()) fail(name, ": VLF cache is corrupt (trailing bytes)");
     checkLoaded(v, name);
     checkScene(v, scene, settings, name);

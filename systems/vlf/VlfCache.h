@@ -24,7 +24,8 @@ struct VlfBakeStats;
 class VlfCache {
 public:
     /// 2: texel coverage is exact (clipped triangle area), no longer 4 x 4 samples.
-    static constexpr std::uint32_t kVersion = 2;
+    /// 3: the cells are packed (half floats and a scale, packCells), no longer RGBA floats.
+    static constexpr std::uint32_t kVersion = 3;
     /// The first bytes of every VLF cache file.
     static constexpr std::string_view kMagic{"QGIVLF\r\n", 8};
 

@@ -122,19 +122,11 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelow
         bakeField(world, 3, 32, 8, 2);
         const VlfField& field = world.ctx().get<VlfField>();
         ASSERT_EQ(field.vlf.specularFaceCount(), faceBelowFirst ? 2u : 1u);
-        // The cells as the renderer's atlas holds them (half floats times a power of two),
-        // for the CPU lookup the shader is held to.
-        std::vector<glm::u16vec4> packed;
-        const float cellScale = packVlfCells(field.vlf.tiles(), packed);
+        // The CPU lookup reads the cells as the renderer's atlas holds them (half floats times
+        // a power of two): the shader is held to it.
         if (brightness > 1e4f) {
-            ASSERT_GT(cellScale, 1.f) << "the atlas is not scaled";
+            ASSERT_GT(field.vlf.cellScale(), 1.f) << "the atlas is not scaled";
         }
-        std::vector<glm::vec4> atlasCells(packed.size());
-        for (std::size_t i = 0; i < packed.size(); ++i)
-            atlasCells[i] = glm::vec4(cellScale * glm::unpackHalf1x16(packed[i].x),
-                                      cellScale * glm::unpackHalf1x16(packed[i].y),
-                                      cellScale * glm::unpackHalf1x16(packed[i].z),
-                                      glm::unpackHalf1x16(packed[i].w));
 
         // Photon mode, no direct light: the floor shows the VLF alone.
         const ImageF hdr = renderFrame(world, ShadingMode::Photon);
@@ -148,7 +140,7 @@ void expectShaderLookupMatchesTheCpuLookup(const Material& floor, bool faceBelow
         ASSERT_GT(field.vlf.faces()[face].normal.y, 0.99f); // the floor
         const auto lookup = [&](const glm::dvec3& p) {
             return field.vlf.specularRadiance(face, glm::vec3(p),
-                                              glm::vec3(glm::normalize(eyeAt - p)), &atlasCells);
+                                              glm::vec3(glm::normalize(eyeAt - p)));
         };
         // Where the GPU's floor point may lie. The rasterizer snaps vertices to its sub-pixel
         // grid (2^-GL_SUBPIXEL_BITS of a pixel), so the position a pixel interpolates is that
@@ -299,7 +291,7 @@ TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAGlossyFloor) {
 
 TEST(RenderVlf, ShaderLookupMatchesTheCpuLookupOnAMirrorOfLampsTooBrightForHalfFloats) {
     // Walls of up to 3e5 W/(m^2 sr): the atlas holds the cells divided by a power of two
-    // (packVlfCells), which the shader multiplies back.
+    // (vlf::packCells), which the shader multiplies back.
     expectShaderLookupMatchesTheCpuLookup(specularFloor({0.8f, 0.7f, 0.6f}, 0.f), false, 1e5f);
 }
 

@@ -83,7 +83,7 @@ TEST(VlfCache, RoundTripKeepsEveryValue) {
     EXPECT_EQ(a.key(), b.key());
     EXPECT_EQ(a.irradiance(), b.irradiance());
     EXPECT_EQ(a.texelCoverage(), b.texelCoverage());
-    EXPECT_EQ(a.tiles(), b.tiles());
+    EXPECT_EQ(a.unpackedCells(), b.unpackedCells());
     EXPECT_EQ(a.slots(), b.slots());
     EXPECT_EQ(a.tileCount(), b.tileCount());
     EXPECT_EQ(a.center(), b.center());
@@ -156,7 +156,7 @@ namespace {
 /// Where each of save()'s arrays starts in a file (after its count), and the tile count.
 struct Sections {
     std::size_t faces = 0, faceMaps = 0, coverage = 0, irradiance = 0, specularIndex = 0,
-                specularFaces = 0, blocks = 0, slots = 0, tileCount = 0, tiles = 0;
+                specularFaces = 0, blocks = 0, slots = 0, tileCount = 0, cellScale = 0, tiles = 0;
 };
 
 Sections sections(const std::vector<char>& file) {
@@ -184,7 +184,9 @@ Sections sections(const std::vector<char>& file) {
     s.slots = array(sizeof(std::int32_t));
     s.tileCount = at;
     at += sizeof(std::uint64_t);
-    s.tiles = array(sizeof(glm::vec4));
+    s.cellScale = at;
+    at += sizeof(float);
+    s.tiles = array(sizeof(glm::u16vec4));
     EXPECT_EQ(at, file.size()) << "save()'s layout changed: update sections()";
     return s;
 }
@@ -258,10 +260,17 @@ TEST(VlfCache, HostileValuesWithAValidHashAreRejected) {
     expectMessage(path, *scene, s, "a tile block faces no side");
     writeAll(path, withValue(good, at.tileCount, std::uint64_t(1) << 62));
     expectMessage(path, *scene, s, "more tiles than the file holds");
-    writeAll(path, withValue(good, at.tiles + 12, -1.f)); // cell 0's weight
+    // Cell 0's weight as a half float -1, then its red as +inf and as NaN; the scale 3 and 0.5.
+    writeAll(path, withValue(good, at.tiles + 6, std::uint16_t(0xbc00)));
     expectMessage(path, *scene, s, "a tile cell is negative or not finite");
-    writeAll(path, withValue(good, at.tiles, std::numeric_limits<float>::infinity()));
+    writeAll(path, withValue(good, at.tiles, std::uint16_t(0x7c00)));
     expectMessage(path, *scene, s, "a tile cell is negative or not finite");
+    writeAll(path, withValue(good, at.tiles, std::uint16_t(0x7e00)));
+    expectMessage(path, *scene, s, "a tile cell is negative or not finite");
+    writeAll(path, withValue(good, at.cellScale, 3.f));
+    expectMessage(path, *scene, s, "the cells' scale is not a power of two");
+    writeAll(path, withValue(good, at.cellScale, 0.5f));
+    expectMessage(path, *scene, s, "the cells' scale is not a power of two");
 
     // A face that is well formed but not the scene's (face 0's emission red channel).
     writeAll(path, withValue(good, at.faces + 76, 1.f));
@@ -304,13 +313,13 @@ TEST(VlfCache, LoadOrBakeRebuildsABadFile) {
     EXPECT_TRUE(baked);
     const Vlf second = VlfCache::loadOrBake(*scene, s, path, &baked);
     EXPECT_FALSE(baked);
-    EXPECT_EQ(first.tiles(), second.tiles());
+    EXPECT_EQ(first.unpackedCells(), second.unpackedCells());
     std::vector<char> bytes = readAll(path);
     bytes[bytes.size() - 5] = char(bytes[bytes.size() - 5] ^ 1);
     writeAll(path, bytes);
     const Vlf third = VlfCache::loadOrBake(*scene, s, path, &baked);
     EXPECT_TRUE(baked);
-    EXPECT_EQ(first.tiles(), third.tiles());
+    EXPECT_EQ(first.unpackedCells(), third.unpackedCells());
     EXPECT_NO_THROW(VlfCache::load(path, *scene, s)); // the rebuilt file is good
     std::filesystem::remove(path);
 }
@@ -324,7 +333,7 @@ TEST(VlfCache, AnUnwritableCacheFileStillGivesTheBakedField) {
     bool baked = false;
     const Vlf field = VlfCache::loadOrBake(*scene, s, blocker / "field.vlf", &baked);
     EXPECT_TRUE(baked);
-    EXPECT_EQ(field.tiles(), bakeVlf(*scene, s).tiles());
+    EXPECT_EQ(field.unpackedCells(), bakeVlf(*scene, s).unpackedCells());
     std::filesystem::remove(blocker);
 }
 
@@ -417,7 +426,7 @@ TEST(VlfSystem, PublishesTheFieldAndMapsSpecularFacesToEntities) {
     frame.vlf = settings;
     FrameSchedule schedule(again, frame);
     ASSERT_TRUE(again.ctx().contains<VlfField>());
-    EXPECT_EQ(again.ctx().get<VlfField>().vlf.tiles(), field.vlf.tiles());
+    EXPECT_EQ(again.ctx().get<VlfField>().vlf.unpackedCells(), field.vlf.unpackedCells());
     std::filesystem::remove(settings.cacheFile);
 }
 

@@ -339,18 +339,20 @@ TEST(VlfStructure, MemoryIsAccounted) {
     EXPECT_EQ(mem.directions, 33u);
     EXPECT_GT(mem.tiles, 0u);
     EXPECT_EQ(mem.tileCells, mem.tiles * 16);
-    EXPECT_EQ(mem.tileCells, v.tiles().size());
+    EXPECT_EQ(mem.tileCells, v.cellCount());
     std::size_t texels = 0;
     for (const FaceMap& m : v.faceMaps())
         texels += std::size_t(m.width) * m.height;
     EXPECT_EQ(mem.diffuseTexels, texels);
-    // Rendering keeps RGBA float per cell and RGB float per texel, plus the index.
-    EXPECT_GE(mem.renderBytes, mem.tileCells * 16 + texels * 12);
-    // The bake adds 56 B per cell (three RGB and two RGBA arrays, one of them a weight) and per
+    // Rendering keeps a packed cell (four half floats) per cell and RGB float per texel, plus
+    // the index.
+    EXPECT_GE(mem.renderBytes, mem.tileCells * 8 + texels * 12);
+    // The bake adds 72 B per cell (its float render table, packed at the end, another RGBA
+    // array, three RGB arrays and a weight) and per
     // texel unshot and received irradiance plus one copy per work chunk (16 here). This pins
     // the account to the Baker's arrays as they are; the glossy lobe tables, sized by the
     // lobes, are left out (ARCHITECTURE.md, VLF memory).
-    EXPECT_EQ(mem.bakeBytes - mem.renderBytes, mem.tileCells * 56 + texels * 18 * 12);
+    EXPECT_EQ(mem.bakeBytes - mem.renderBytes, mem.tileCells * 72 + texels * 18 * 12);
 }
 
 TEST(VlfStructure, BadSettingsAreRejected) {
@@ -425,7 +427,7 @@ TEST(VlfGpuCells, HalfFloatsHoldEachValueWithinTheirRoundingAndTheFlagOfEachCell
                            std::pow(10.f, exponent(random)),
                            i % 3 == 0 ? 0.f : 0.25f * float(i % 5));
     std::vector<glm::u16vec4> packed;
-    ASSERT_EQ(packVlfCells(cells, packed), 1.f);
+    ASSERT_EQ(packCells(cells, packed), 1.f);
     ASSERT_EQ(packed.size(), cells.size());
     for (std::size_t i = 0; i < cells.size(); ++i) {
         for (int c = 0; c < 3; ++c) {
@@ -446,7 +448,7 @@ TEST(VlfGpuCells, ABrightCellScalesTheWholeTableByAPowerOfTwo) {
         {-1.f, std::nanf(""), std::numeric_limits<float>::infinity(), 1.f},
         {1e-7f, 2e-3f, 7.f, 1.f}};
     std::vector<glm::u16vec4> packed;
-    const float scale = packVlfCells(cells, packed);
+    const float scale = packCells(cells, packed);
     ASSERT_EQ(scale, 64.f);
     for (const std::size_t i : {std::size_t(0), std::size_t(2)})
         for (int c = 0; c < 3; ++c) {
@@ -458,6 +460,6 @@ TEST(VlfGpuCells, ABrightCellScalesTheWholeTableByAPowerOfTwo) {
     for (int c = 0; c < 3; ++c)
         EXPECT_EQ(glm::unpackHalf1x16(packed[1][c]), 0.f) << c;
     std::vector<glm::u16vec4> none;
-    EXPECT_EQ(packVlfCells({}, none), 1.f);
+    EXPECT_EQ(packCells({}, none), 1.f);
     EXPECT_TRUE(none.empty());
 }
