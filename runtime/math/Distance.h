@@ -8,11 +8,14 @@
 
 namespace qgi {
 
-/// Distance from c to the segment [a, b] (to a itself when the segment has no length).
-inline float distanceToSegment(const glm::vec3& c, const glm::vec3& a, const glm::vec3& b) {
-    const glm::vec3 ab = b - a;
-    const float len2 = glm::dot(ab, ab);
-    const float t = len2 > 0.f ? std::clamp(glm::dot(c - a, ab) / len2, 0.f, 1.f) : 0.f;
+/// Distance from c to the segment [a, b] (to a itself when the segment has no length), in the
+/// vectors' precision (float or double).
+template <typename T, glm::qualifier Q>
+T distanceToSegment(const glm::vec<3, T, Q>& c, const glm::vec<3, T, Q>& a,
+                    const glm::vec<3, T, Q>& b) {
+    const glm::vec<3, T, Q> ab = b - a;
+    const T len2 = glm::dot(ab, ab);
+    const T t = len2 > T(0) ? std::clamp(glm::dot(c - a, ab) / len2, T(0), T(1)) : T(0);
     return glm::length(a + t * ab - c);
 }
 

@@ -94,6 +94,11 @@ void ontoAxisPlane(const Registry& registry, const Hit& hit, Landing& landing) {
         if (k > 0 && c != coordinate) return;
         coordinate = c;
     }
+    // The landing lies within rounding of the plane; one farther off came from another
+    // triangle than the ray scene's (the registry changed since it was built): left alone.
+    if (!(std::abs(landing.position[axis] - coordinate) <=
+          1e-4f * std::max(1.f, std::abs(coordinate))))
+        return;
     landing.position[axis] = coordinate;
     landing.normal = glm::vec3(0.f);
     landing.normal[axis] = hit.normal[axis] > 0.f ? 1.f : -1.f;

@@ -23,13 +23,17 @@ static_assert(kCullBlock == 1 << kCullDepth);
 
 /// The ball (c, R) against the cone of rays from every x within h of q to the light.
 /// The cone lies inside the capsule of radius b around the segment from q to L, so a ball
-/// clear of the capsule (with raySlack more for the float test's rounding) is clear of the
-/// cone: most pairs are settled by that cheaper test.
+/// clear of the capsule (with raySlack more) is clear of the cone: most pairs are settled by
+/// that cheaper test. Both in double: a box's test must pass wherever one of its points' does,
+/// and the point's and the box's distances and sums rounded in float could differ by more than
+/// the box's margins where R is thousands of cells wide or c far from the grid.
 bool passes(const glm::vec3& c, float R, const glm::vec3& q, const AreaLight& light, float h,
             float raySlack) {
-    if (distanceToSegment(c, q, light.centre) >= R + light.boundRadius + 2.f * raySlack + h)
+    const double reach = double(R) + double(raySlack) + double(h);
+    if (distanceToSegment(glm::dvec3(c), glm::dvec3(q), glm::dvec3(light.centre)) >=
+        reach + double(light.boundRadius) + double(raySlack))
         return false;
-    return distanceBeyondCone(c, q, light.centre, light.boundRadius) < double(R + raySlack + h);
+    return distanceBeyondCone(c, q, light.centre, light.boundRadius) < reach;
 }
 
 bool eitherPose(const MobileMove& m, const glm::vec3& q, const AreaLight& light, float h,

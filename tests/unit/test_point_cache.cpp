@@ -6,6 +6,7 @@
 #include "components/WorldTransform.h"
 #include "runtime/core/Error.h"
 #include "runtime/ecs/Registry.h"
+#include "runtime/math/Distance.h"
 #include "runtime/raytrace/RayScene.h"
 #include "runtime/scene/SceneInfo.h"
 #include "systems/detp/DiscIndex.h"
@@ -27,6 +28,7 @@
 #include <oneapi/tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -450,64 +452,156 @@ TEST(ShadowCandidates, TheCulledWalkFindsExactlyWhatTestingEveryPointFinds) {
     std::mt19937 rng(23);
     std::uniform_real_distribution<float> u(0.f, 1.f);
     const auto in = [&](float lo, float hi) { return lo + (hi - lo) * u(rng); };
+    // The same scene 10 km off the origin too, where float rounding is a hundredth of a cell.
     std::size_t found = 0, culled = 0, mergedMoves = 0;
-    for (const float cellSize : {0.f, 0.07f, 0.9f}) {
-        PointCache cache = syntheticCache(3000, 7);
-        cache.settings.gridCellSize = cellSize;
-        cache.buildGrid();
-        for (int trial = 0; trial < 40; ++trial) {
-            std::vector<AreaLight> lights(4);
-            for (AreaLight& l : lights) {
-                l.centre = {in(-3.f, 3.f), in(0.8f, 3.f), in(-3.f, 3.f)};
-                l.boundRadius = in(0.05f, 1.f);
-            }
-            lights[3].centre.y = -1.5f;
-            lights[3].boundRadius = 0.5f;
-            std::vector<MobileMove> moves;
-            for (int m = 0, count = 1 + trial % 3; m < count; ++m) {
-                const glm::vec3 before(in(-2.f, 2.f), in(0.05f, 1.f), in(-2.f, 2.f));
-                const float radius = in(0.05f, 0.4f);
-                const float step = (trial + m) % 2 == 0 ? in(0.f, 2.f * radius) : in(1.f, 3.f);
-                const glm::vec3 direction =
-                    glm::normalize(glm::vec3(in(-1.f, 1.f), in(-0.3f, 0.3f), in(-1.f, 1.f)));
-                moves.push_back(MobileMove::make(before, radius, before + step * direction,
-                                                 radius * in(0.8f, 1.2f)));
-                const MobileMove& mm = moves.back();
-                if (mm.merged) {
-                    ++mergedMoves;
-                    // The one ball holds both poses' balls.
-                    EXPECT_LE(glm::length(mm.middle - mm.before) + mm.radiusBefore, mm.radiusBoth);
-                    EXPECT_LE(glm::length(mm.middle - mm.after) + mm.radiusAfter, mm.radiusBoth);
+    for (const glm::vec3 offset : {glm::vec3(0.f), glm::vec3(1e4f, -3e3f, 7e3f)})
+        for (const float cellSize : {0.f, 0.07f, 0.9f}) {
+            PointCache cache = syntheticCache(3000, 7);
+            for (glm::vec3& p : cache.position)
+                p += offset;
+            cache.settings.gridCellSize = cellSize;
+            cache.buildGrid();
+            for (int trial = 0; trial < 40; ++trial) {
+                std::vector<AreaLight> lights(4);
+                for (AreaLight& l : lights) {
+                    l.centre = offset + glm::vec3(in(-3.f, 3.f), in(0.8f, 3.f), in(-3.f, 3.f));
+                    l.boundRadius = in(0.05f, 1.f);
                 }
+                lights[3].centre.y = offset.y - 1.5f;
+                lights[3].boundRadius = 0.5f;
+                std::vector<MobileMove> moves;
+                for (int m = 0, count = 1 + trial % 3; m < count; ++m) {
+                    const glm::vec3 before =
+                        offset + glm::vec3(in(-2.f, 2.f), in(0.05f, 1.f), in(-2.f, 2.f));
+                    const float radius = in(0.05f, 0.4f);
+                    const float step = (trial + m) % 2 == 0 ? in(0.f, 2.f * radius) : in(1.f, 3.f);
+                    const glm::vec3 direction =
+                        glm::normalize(glm::vec3(in(-1.f, 1.f), in(-0.3f, 0.3f), in(-1.f, 1.f)));
+                    moves.push_back(MobileMove::make(before, radius, before + step * direction,
+                                                     radius * in(0.8f, 1.2f)));
+                    const MobileMove& mm = moves.back();
+                    if (mm.merged) {
+                        ++mergedMoves;
+                        // The one ball holds both poses' balls.
+                        EXPECT_LE(glm::length(mm.middle - mm.before) + mm.radiusBefore,
+                                  mm.radiusBoth);
+                        EXPECT_LE(glm::length(mm.middle - mm.after) + mm.radiusAfter,
+                                  mm.radiusBoth);
+                    }
+                }
+                const float raySlack = 1e-3f;
+                std::vector<std::vector<std::uint64_t>> got(cache.size());
+                const std::size_t tested = forEachShadowedPair(
+                    cache.grid, cache.position, cache.normal, lights, moves, raySlack,
+                    [&](std::uint32_t p, std::uint32_t m, std::uint32_t l) {
+                        got[p].push_back(std::uint64_t(m) << 32 | l);
+                    });
+                std::size_t pairs = 0;
+                for (std::uint32_t p = 0; p < cache.size(); ++p) {
+                    std::vector<std::uint64_t> expected;
+                    for (std::uint32_t m = 0; m < moves.size(); ++m)
+                        for (std::uint32_t l = 0; l < lights.size(); ++l)
+                            if (mayShadow(moves[m], cache.position[p], cache.normal[p], lights[l],
+                                          raySlack))
+                                expected.push_back(std::uint64_t(m) << 32 | l);
+                    ASSERT_EQ(got[p], expected)
+                        << "point " << p << ", cell " << cellSize << ", trial " << trial;
+                    pairs += expected.size();
+                }
+                found += pairs;
+                culled += tested < cache.size() ? 1 : 0;
+                EXPECT_GE(tested,
+                          std::size_t(std::count_if(got.begin(), got.end(),
+                                                    [](const auto& g) { return !g.empty(); })));
             }
-            const float raySlack = 1e-3f;
-            std::vector<std::vector<std::uint64_t>> got(cache.size());
-            const std::size_t tested = forEachShadowedPair(
-                cache.grid, cache.position, cache.normal, lights, moves, raySlack,
-                [&](std::uint32_t p, std::uint32_t m, std::uint32_t l) {
-                    got[p].push_back(std::uint64_t(m) << 32 | l);
-                });
-            std::size_t pairs = 0;
-            for (std::uint32_t p = 0; p < cache.size(); ++p) {
-                std::vector<std::uint64_t> expected;
-                for (std::uint32_t m = 0; m < moves.size(); ++m)
-                    for (std::uint32_t l = 0; l < lights.size(); ++l)
-                        if (mayShadow(moves[m], cache.position[p], cache.normal[p], lights[l],
-                                      raySlack))
-                            expected.push_back(std::uint64_t(m) << 32 | l);
-                ASSERT_EQ(got[p], expected)
-                    << "point " << p << ", cell " << cellSize << ", trial " << trial;
-                pairs += expected.size();
-            }
-            found += pairs;
-            culled += tested < cache.size() ? 1 : 0;
-            EXPECT_GE(tested, std::size_t(std::count_if(got.begin(), got.end(),
-                                                        [](const auto& g) { return !g.empty(); })));
         }
+    EXPECT_GT(found, 2000u);      // the moves do shadow points
+    EXPECT_GT(culled, 120u);      // and the walk leaves points untested
+    EXPECT_GT(mergedMoves, 100u); // both kinds of move were drawn
+}
+
+TEST(ShadowCandidates, PointsOnBoxCornersAtTheRulesThresholdAreFound) {
+    // The culling's margins, tested where they matter: 10 km off the origin (float rounding a
+    // few hundredths of a 5 cm cell), points exactly on grid corners (on the edge of the cells
+    // and blocks that hold them), and for each such point a box of 1, 2, 4 or 8 cells around
+    // it, a mobile just beyond the point on the line from the box's centre through it, a small
+    // light on the other side, and the mobile's radius the smallest float for which
+    // mayShadow() holds: the walk must still find the point.
+    const glm::vec3 offset(1e4f, 1e4f, 1e4f);
+    const float cellSize = 0.05f;
+    std::mt19937 rng(31);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    PointGrid::Params params;
+    params.cellSize = cellSize;
+    std::vector<glm::vec3> positions, normals;
+    std::vector<float> radii;
+    const float extent = 64.f * cellSize;
+    for (int i = 0; i < 1000; ++i) {
+        positions.push_back(offset + extent * glm::vec3(u(rng), u(rng), u(rng)));
+        normals.emplace_back(0.f, 1.f, 0.f);
+        radii.push_back(0.5f * cellSize);
     }
-    EXPECT_GT(found, 1000u);     // the moves do shadow points
-    EXPECT_GT(culled, 60u);      // and the walk leaves points untested
-    EXPECT_GT(mergedMoves, 50u); // both kinds of move were drawn
+    PointGrid first;
+    first.build(positions, normals, radii, params);
+    // Corner points inside the first grid's box keep its origin and cells.
+    const std::size_t firstCorner = positions.size();
+    for (int i = 0; i < 2000; ++i) {
+        glm::ivec3 k(1 + int(u(rng) * float(first.dims().x - 3)),
+                     1 + int(u(rng) * float(first.dims().y - 3)),
+                     1 + int(u(rng) * float(first.dims().z - 3)));
+        if (i % 2) k = glm::max(k / 8 * 8, glm::ivec3(8)); // a block's corner
+        k = glm::min(k, first.dims() - 2);
+        positions.push_back(first.origin() + glm::vec3(k) * first.cellSize());
+        normals.emplace_back(0.f, 1.f, 0.f);
+        radii.push_back(0.5f * cellSize);
+    }
+    PointGrid grid;
+    grid.build(positions, normals, radii, params);
+    ASSERT_EQ(grid.origin(), first.origin());
+    ASSERT_EQ(grid.cellSize(), first.cellSize());
+    const float raySlack = 1e-4f;
+    std::size_t checked = 0;
+    for (int trial = 0; trial < 800; ++trial) {
+        const std::uint32_t p = std::uint32_t(firstCorner + std::size_t(u(rng) * 2000.f) % 2000);
+        const glm::vec3 x = positions[p];
+        const std::int64_t c = grid.cellOf(x);
+        const glm::ivec3 dims = grid.dims();
+        const glm::ivec3 cell(int(c % dims.x), int(c / dims.x % dims.y),
+                              int(c / (std::int64_t(dims.x) * dims.y)));
+        const int side = 1 << (trial % 4);
+        const glm::ivec3 lo = cell / side * side, hi = glm::min(lo + side, dims);
+        const glm::vec3 q = grid.origin() + (glm::vec3(lo) + 0.5f * glm::vec3(hi - lo)) * cellSize;
+        const glm::dvec3 away = glm::normalize(glm::dvec3(x) - glm::dvec3(q));
+        AreaLight light;
+        light.centre = glm::vec3(glm::dvec3(x) - away * double(24.f * cellSize));
+        light.boundRadius = 0.01f * cellSize;
+        if (glm::dot(normals[p], light.centre - x) < -light.boundRadius) continue;
+        const glm::vec3 centre =
+            glm::vec3(glm::dvec3(x) + away * double(cellSize * (0.5f + 3.f * u(rng))));
+        // The smallest radius that shadows x, by float steps from the distance.
+        const auto shadows = [&](float R) {
+            const MobileMove m =
+                MobileMove::make(centre, R, centre + glm::vec3(100.f * cellSize), R);
+            return mayShadow(m, x, normals[p], light, raySlack);
+        };
+        float R = float(distanceBeyondCone(centre, x, light.centre, light.boundRadius));
+        for (int step = 0; step < 4096 && !shadows(R); ++step)
+            R = std::nextafter(R, 1e30f);
+        for (int step = 0; step < 4096 && R > 0.f && shadows(std::nextafter(R, 0.f)); ++step)
+            R = std::nextafter(R, 0.f);
+        if (!shadows(R)) continue;
+        const std::vector<MobileMove> moves = {
+            MobileMove::make(centre, R, centre + glm::vec3(100.f * cellSize), R)};
+        const std::vector<AreaLight> lights = {light};
+        std::atomic<bool> found{false}; // visits come from several tasks
+        forEachShadowedPair(grid, positions, normals, lights, moves, raySlack,
+                            [&](std::uint32_t point, std::uint32_t, std::uint32_t) {
+                                if (point == p) found = true;
+                            });
+        EXPECT_TRUE(found) << "point " << p << " in a box of " << side << " cells";
+        ++checked;
+    }
+    EXPECT_GT(checked, 400u); // the rest have the light below their horizon
 }
 
 TEST(PointCacheQuery, BlendIsTheFalloffWeightedMeanOfThePointsInRange) {
