@@ -436,21 +436,19 @@ std::optional<glm::vec3> Vlf::lookupTiles(const Cells& cells, std::uint32_t face
     return sum / wsum;
 }
 
-glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer,
-                                const std::vector<glm::vec4>* cells) const {
+glm::vec3 Vlf::specularRadiance(std::uint32_t face, const glm::vec3& x,
+                                const glm::vec3& toViewer) const {
     const Face& f = mFaces[face];
     if (!f.isSpecular()) return glm::vec3(0.f);
-    const auto lookup = [&](const glm::vec3& dir) {
-        return cells ? lookupTiles(*cells, face, x, dir) : lookupTiles(cellView(), face, x, dir);
-    };
     std::optional<glm::vec3> value;
     if (f.isMirror()) {
         // Tiles hold incident light, indexed by the front-side direction it arrives from:
         // what the viewer sees arrives from the reflected view direction.
-        value = lookup(2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer);
+        const glm::vec3 from = 2.f * glm::dot(f.normal, toViewer) * f.normal - toViewer;
+        value = lookupTiles(cellView(), face, x, from);
         if (value) *value *= f.specular;
     } else {
-        value = lookup(toViewer);
+        value = lookupTiles(cellView(), face, x, toViewer);
     }
     return value.value_or(glm::vec3(0.f));
 }

@@ -196,10 +196,9 @@ public:
     std::optional<glm::vec3> lookupTiles(const Cells& cells, std::uint32_t face, const glm::vec3& x,
                                          const glm::vec3& dir) const;
     /// Specular outgoing radiance of face `face` at x towards unit `toViewer` (zero for a
-    /// diffuse face or where no tile covers it). `cells`, when given, stand in for the baked
-    /// cells (laid out like them): the lookup of a copy the way it is held elsewhere.
-    glm::vec3 specularRadiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer,
-                               const std::vector<glm::vec4>* cells = nullptr) const;
+    /// diffuse face or where no tile covers it), from the packed cells the GPU holds too.
+    glm::vec3 specularRadiance(std::uint32_t face, const glm::vec3& x,
+                               const glm::vec3& toViewer) const;
     /// diffuseRadiance + specularRadiance.
     glm::vec3 radiance(std::uint32_t face, const glm::vec3& x, const glm::vec3& toViewer) const;
 

@@ -21,7 +21,6 @@
 #include <epoxy/gl.h>
 #include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
-#include <glm/gtc/packing.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
