@@ -11,6 +11,7 @@
 #include <glm/geometric.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace qgi {
@@ -66,9 +67,15 @@ enum class Rays {
     Replay, ///< read the sample's bit of `reached`; no ray
 };
 
+/// Samples whose shadow rays are traced together: 8-wide packets, from one point towards one
+/// light, are coherent, and a packet costs little more than one ray.
+constexpr std::uint32_t kSampleChunk = 32;
+
 /// The estimate of shadeAreaLight. One function body for all three ways, so that a replay
 /// computes every sample's weight with the very instructions the recording did (two
 /// instantiations could contract multiply-adds differently) and gives its value bit for bit.
+/// Samples go in chunks: each chunk's weights and rays first, then its rays traced as packets
+/// (or its bits read), then its sums in sample order.
 LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex, const glm::vec3& x,
                                const glm::vec3& n, std::uint32_t samples, std::uint64_t seed,
                                std::uint32_t key, Rays rays, const RayScene* scene,
@@ -81,44 +88,61 @@ LightSample integrateAreaLight(const AreaLight& light, std::uint32_t lightIndex,
     const bool stratified = side * side == samples;
     const glm::vec3 origin = photon::offsetFromSurface(x, n);
     double total = 0.0, visible = 0.0;
-    for (std::uint32_t s = 0; s < samples; ++s) {
-        float u1 = u(2 * s), u2 = u(2 * s + 1);
-        if (stratified) {
-            u1 = std::min((float(s % side) + u1) / float(side), photon::kOneMinusEpsilon);
-            u2 = std::min((float(s / side) + u2) / float(side), photon::kOneMinusEpsilon);
+    std::array<double, kSampleChunk> weight;
+    std::array<std::uint32_t, kSampleChunk> sampleOf;
+    std::array<Ray, kSampleChunk> ray;
+    std::array<std::uint8_t, kSampleChunk> blocked;
+    for (std::uint32_t first = 0; first < samples; first += kSampleChunk) {
+        const std::uint32_t last = std::min(samples, first + kSampleChunk);
+        std::uint32_t count = 0; // samples of the chunk that face both ways
+        for (std::uint32_t s = first; s < last; ++s) {
+            float u1 = u(2 * s), u2 = u(2 * s + 1);
+            if (stratified) {
+                u1 = std::min((float(s % side) + u1) / float(side), photon::kOneMinusEpsilon);
+                u2 = std::min((float(s / side) + u2) / float(side), photon::kOneMinusEpsilon);
+            }
+            // u1 picks the triangle by area and, rescaled inside its CDF interval, the point on
+            // it: the strata stay strata of the whole light.
+            const auto it = std::upper_bound(light.cdf.begin(), light.cdf.end(), u1);
+            const std::size_t t =
+                std::min(std::size_t(it - light.cdf.begin()), light.cdf.size() - 1);
+            const float low = t > 0 ? light.cdf[t - 1] : 0.f;
+            const float width = light.cdf[t] - low;
+            const float v1 =
+                width > 0.f ? std::clamp((u1 - low) / width, 0.f, photon::kOneMinusEpsilon) : 0.f;
+            const auto& tri = light.triangles[t];
+            const glm::vec2 st = photon::sampleTriangle(v1, u2);
+            const glm::vec3 y = tri.corner + st.x * tri.edge1 + st.y * tri.edge2;
+            const glm::vec3 w = y - x;
+            const float d2 = glm::dot(w, w);
+            if (!(d2 > 0.f)) continue;
+            const float d = std::sqrt(d2);
+            const float cosX = glm::dot(n, w) / d, cosY = -glm::dot(tri.normal, w) / d;
+            if (!(cosX > 0.f && cosY > 0.f)) continue;
+            weight[count] = double(cosX) * double(cosY) / double(d2);
+            sampleOf[count] = s;
+            Ray& r = ray[count];
+            r.origin = origin;
+            r.direction = photon::offsetFromSurface(y, tri.normal) - origin;
+            r.tnear = 0.f;
+            r.tfar = 1.f - 1e-4f;
+            ++count;
         }
-        // u1 picks the triangle by area and, rescaled inside its CDF interval, the point on it:
-        // the strata stay strata of the whole light.
-        const auto it = std::upper_bound(light.cdf.begin(), light.cdf.end(), u1);
-        const std::size_t t = std::min(std::size_t(it - light.cdf.begin()), light.cdf.size() - 1);
-        const float low = t > 0 ? light.cdf[t - 1] : 0.f;
-        const float width = light.cdf[t] - low;
-        const float v1 =
-            width > 0.f ? std::clamp((u1 - low) / width, 0.f, photon::kOneMinusEpsilon) : 0.f;
-        const auto& tri = light.triangles[t];
-        const glm::vec2 st = photon::sampleTriangle(v1, u2);
-        const glm::vec3 y = tri.corner + st.x * tri.edge1 + st.y * tri.edge2;
-        const glm::vec3 w = y - x;
-        const float d2 = glm::dot(w, w);
-        if (!(d2 > 0.f)) continue;
-        const float d = std::sqrt(d2);
-        const float cosX = glm::dot(n, w) / d, cosY = -glm::dot(tri.normal, w) / d;
-        if (!(cosX > 0.f && cosY > 0.f)) continue;
-        const double f = double(cosX) * double(cosY) / double(d2);
-        total += f;
-        Ray ray;
-        ray.origin = origin;
-        ray.direction = photon::offsetFromSurface(y, tri.normal) - origin;
-        ray.tnear = 0.f;
-        ray.tfar = 1.f - 1e-4f;
-        bool through;
         if (rays == Rays::Replay) {
-            through = ((reached[s / 32] >> (s % 32)) & 1u) != 0;
+            for (std::uint32_t i = 0; i < count; ++i) {
+                const std::uint32_t s = sampleOf[i];
+                blocked[i] = ((reached[s / 32] >> (s % 32)) & 1u) != 0 ? 0 : 1;
+            }
         } else {
-            through = !scene->occluded(ray);
-            if (through && rays == Rays::Record) reached[s / 32] |= 1u << (s % 32);
+            scene->occluded(std::span<const Ray>(ray.data(), count),
+                            std::span<std::uint8_t>(blocked.data(), count));
         }
-        if (through) visible += f;
+        for (std::uint32_t i = 0; i < count; ++i) {
+            total += weight[i];
+            if (blocked[i]) continue;
+            visible += weight[i];
+            if (rays == Rays::Record) reached[sampleOf[i] / 32] |= 1u << (sampleOf[i] % 32);
+        }
     }
     LightSample out;
     out.irradiance = light.radiance * float(double(light.area) * visible / double(samples));
