@@ -209,7 +209,9 @@ void prepareOutput(const std::optional<std::string>& base, const char* option,
         files.emplace_back(*base + extension);
     for (const fs::path& file : files) {
         claimOutput(file, option, written);
-        if (!fs::exists(file, error)) continue;
+        const bool present = fs::exists(file, error);
+        if (error) fail(option, ": '", file.string(), "': ", error.message());
+        if (!present) continue;
         for (const fs::path& input : inputs)
             if (fs::equivalent(file, input, error))
                 fail(option, ": '", file.string(), "' is an input of this run; not overwritten");
@@ -291,7 +293,7 @@ int runDemo(const DemoOptions& options) {
                                   bool (*isExport)(const std::filesystem::path&),
                                   const char* what) {
         std::error_code sizeError;
-        if (path && std::filesystem::exists(*path) &&
+        if (path && std::filesystem::exists(*path, sizeError) &&
             std::filesystem::file_size(*path, sizeError) != 0 && !isExport(*path))
             fail(option, ": '", *path, "' exists and is not ", what, " of qgi's; not overwritten");
     };

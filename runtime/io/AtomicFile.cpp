@@ -22,7 +22,9 @@ constexpr int kMaxLinkHops = 40;
 std::filesystem::path writeTarget(const std::filesystem::path& path) {
     namespace fs = std::filesystem;
     std::error_code error;
-    fs::path target = path;
+    // From the working folder: a bare name ("shot.png") then has a folder, the working one.
+    fs::path target = fs::absolute(path, error);
+    if (error) target = path;
     for (int hops = 0; hops < kMaxLinkHops && fs::is_symlink(fs::symlink_status(target, error));
          ++hops) {
         const fs::path link = fs::read_symlink(target, error);

@@ -384,6 +384,20 @@ TEST(DemoSmoke, AScreenshotOverAFolderIsRefusedBeforeTheRun) {
     EXPECT_FALSE(fs::exists(dir / "shot.exr"));
 }
 
+TEST(DemoSmoke, OutputsNamedWithoutAFolderGoToTheWorkingFolder) {
+    const fs::path dir = scratchDir() / "bare_names";
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const RunResult run = runDemo("--scene cornell --headless --frames 1 --width 16 --height 16 "
+                                  "--photons 1000 --vlf off --screenshot shot --profile prof "
+                                  "--export-irradiance light.ply --export-avatars avatars.csv",
+                                  {}, dir);
+    ASSERT_EQ(run.exitCode, 0) << run.output;
+    for (const char* file :
+         {"shot.png", "shot.exr", "prof.json", "prof.csv", "light.ply", "avatars.csv"})
+        EXPECT_GT(fs::file_size(dir / file), 0u) << file;
+}
+
 TEST(DemoSmoke, OutputPathsThatNameNoFileAreRefused) {
     // An empty path is a command-line error (2), a folder a problem with the output (1).
     for (const auto& [args, code] :
@@ -392,6 +406,19 @@ TEST(DemoSmoke, OutputPathsThatNameNoFileAreRefused) {
         const RunResult run = runDemo(std::string("--headless --frames 1 ") + args);
         EXPECT_EQ(run.exitCode, code) << args << ": " << run.output;
         EXPECT_EQ(run.output.find("ready in"), std::string::npos) << args;
+    }
+    // A name longer than the file system allows: the option is named, before the load.
+    const std::string tooLong = (scratchDir() / std::string(300, 'c')).string();
+    for (const auto& [option, extension] :
+         {std::pair{"--export-irradiance", ".ply"}, std::pair{"--screenshot", ""},
+          std::pair{"--export-scene", ".glb"}}) {
+        const RunResult run =
+            runDemo("--headless --frames 1 " + std::string(option) + " " + tooLong + extension);
+        EXPECT_EQ(run.exitCode, 1) << option << run.output;
+        EXPECT_EQ(run.output.rfind(std::string("qgi-demo: error: ") + option + ":", 0), 0u)
+            << run.output;
+        EXPECT_NE(run.output.find("File name too long"), std::string::npos) << run.output;
+        EXPECT_EQ(run.output.find("ready in"), std::string::npos) << option;
     }
 }
 

@@ -229,6 +229,19 @@ TEST_F(IoTest, AtomicWriteReplacesTheFileOrLeavesItAsItWas) {
                       mDir / "missing" / "a");
 }
 
+TEST_F(IoTest, ABareFileNameIsWrittenInTheWorkingFolder) {
+    // A name without a folder names a file in the working folder, which is its write target's
+    // folder: before, that folder came out empty and the demo refused "shot" as an output.
+    const fs::path before = fs::current_path();
+    fs::current_path(mDir);
+    const fs::path target = writeTarget("bare.csv");
+    writeFileAtomically("bare.csv", "here", "test file");
+    fs::current_path(before);
+    EXPECT_EQ(target, fs::weakly_canonical(mDir) / "bare.csv");
+    EXPECT_EQ(target.parent_path(), fs::weakly_canonical(mDir));
+    EXPECT_EQ(readAll(mDir / "bare.csv"), "here");
+}
+
 TEST_F(IoTest, AtomicWriteThroughASymbolicLinkChangesTheFileItNames) {
     // A dangling link names the file a write creates: an output clash check compares that.
     const fs::path target = mDir / "target.csv", link = mDir / "link.csv";
