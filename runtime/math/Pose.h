@@ -1,7 +1,8 @@
 #pragma once
-// Which world matrices may place a mesh: the one rule the ray scene and the irradiance
-// estimators share, so a pose one refuses the others refuse too.
+// Which world matrices may place a mesh or a light: the one rule the ray scene, the renderer
+// and the lighting systems share, so a pose one refuses the others refuse too.
 
+#include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/matrix.hpp>
@@ -33,6 +34,16 @@ inline bool isUsableLightPosition(const glm::vec3& p) {
     for (int a = 0; a < 3; ++a)
         if (!std::isfinite(p[a]) || std::abs(p[a]) > kMaxPoseReach) return false;
     return true;
+}
+
+/// Where a spot or directional light shines: its local -Z axis in world space (glTF's
+/// convention), unit length, or zero where the pose collapses that axis (a scale of 0 along
+/// it) or it is not finite. Every system leaves a light with no axis dark. The length is
+/// taken in double, so a huge scale (1e20) still gives the axis.
+inline glm::vec3 lightForward(const glm::mat4& world) {
+    const glm::dvec3 z(world[2]);
+    const double length = std::sqrt(glm::dot(z, z));
+    return length > 0.0 && std::isfinite(length) ? glm::vec3(-z / length) : glm::vec3(0.f);
 }
 
 } // namespace qgi

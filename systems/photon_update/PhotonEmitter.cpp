@@ -60,13 +60,6 @@ void disable(PhotonEmitter& emitter, const char* field, const char* problem) {
     emitter.power = glm::vec3(0.f);
 }
 
-/// The light's local -Z axis in world space (glTF), or zero when the matrix collapses it.
-glm::vec3 forwardOf(const glm::mat4& world) {
-    const glm::vec3 z(world[2]);
-    const float length = glm::length(z);
-    return length > 0.f && std::isfinite(length) ? -z / length : glm::vec3(0.f);
-}
-
 /// A rectangle across `direction`, just in front of the box, whose parallel projection along
 /// `direction` covers the box.
 void coverBox(const Aabb& box, PhotonEmitter& emitter) {
@@ -188,7 +181,7 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
             return disable(emitter, "outerConeAngle", "is not in (0, pi/2]");
         if (!(inner >= 0.f && inner < outer))
             return disable(emitter, "innerConeAngle", "is not in [0, outerConeAngle)");
-        emitter.axis = forwardOf(emitter.world);
+        emitter.axis = lightForward(emitter.world);
         if (emitter.axis == glm::vec3(0.f))
             return disable(emitter, "WorldTransform.matrix", "has no -Z axis");
         emitter.cone = photon::SpotCone(inner, outer);
@@ -196,7 +189,7 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
         break;
     }
     case EmitterKind::Directional:
-        emitter.axis = forwardOf(emitter.world);
+        emitter.axis = lightForward(emitter.world);
         if (emitter.axis == glm::vec3(0.f))
             return disable(emitter, "WorldTransform.matrix", "has no -Z axis");
         if (sceneBox.empty()) return disable(emitter, "scene", "is empty");

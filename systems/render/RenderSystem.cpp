@@ -51,10 +51,6 @@ std::string meshProblem(const Mesh& mesh) {
     return {};
 }
 
-glm::vec3 forwardOf(const glm::mat4& world) {
-    return glm::normalize(-glm::vec3(world[2]));
-}
-
 glm::vec3 worldCenter(const DrawItem& item) {
     return glm::vec3(item.model * glm::vec4(item.mesh->bounds.center(), 1.f));
 }
@@ -295,19 +291,23 @@ void RenderSystem::collectLights(const Registry& registry) {
     registry.view<const SpotLight, const WorldTransform>().each(
         [&](const SpotLight& light, const WorldTransform& world) {
             if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
+            const glm::vec3 axis = lightForward(world.matrix);
+            if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Spot;
             out.position = glm::vec3(world.matrix[3]);
-            out.direction = forwardOf(world.matrix);
+            out.direction = axis;
             out.radiance = light.color * light.intensity;
             out.innerConeAngle = light.innerConeAngle;
             out.outerConeAngle = light.outerConeAngle;
         });
     registry.view<const DirectionalLight, const WorldTransform>().each(
         [&](const DirectionalLight& light, const WorldTransform& world) {
+            const glm::vec3 axis = lightForward(world.matrix);
+            if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Directional;
-            out.direction = forwardOf(world.matrix);
+            out.direction = axis;
             out.radiance = light.color * light.irradiance;
         });
 }

@@ -67,12 +67,6 @@ Aabb transformBox(const Aabb& box, const glm::mat4& m) {
     return out;
 }
 
-glm::vec3 forwardOf(const glm::mat4& m) {
-    const glm::vec3 f = -glm::vec3(m[2]);
-    const float length = glm::length(f);
-    return length > 0.f ? f / length : glm::vec3(0.f, 0.f, -1.f);
-}
-
 /// The punctual lights the probes see (those with a pose), each with its stand-in flag, in
 /// registry order: a hash that changes when one is removed, added or (un)tagged.
 std::uint64_t lightSetSignature(const Registry& registry) {
@@ -190,7 +184,7 @@ void ShProbeSystem::snapshotLights(const Registry& registry) {
             Light& out = mLights.emplace_back();
             out.kind = Light::Kind::Spot;
             out.position = glm::vec3(world.matrix[3]);
-            out.direction = forwardOf(world.matrix);
+            out.direction = lightForward(world.matrix);
             out.radiance = light.color * light.intensity;
             // The renderer's falloff (shaders/common/lighting.glsl): linear in cos between the
             // cones, squared.
@@ -204,14 +198,15 @@ void ShProbeSystem::snapshotLights(const Registry& registry) {
         [&](Entity e, const DirectionalLight& light, const WorldTransform& world) {
             Light& out = mLights.emplace_back();
             out.kind = Light::Kind::Directional;
-            out.direction = forwardOf(world.matrix);
+            out.direction = lightForward(world.matrix);
             out.radiance = light.color * light.irradiance;
             out.standIn = registry.has<LightStandIn>(e);
         });
-    // Lights with non-finite data would poison every probe, and one past kMaxPoseReach is
-    // dark everywhere (the photons' rule): leave them out.
+    // Lights with non-finite data would poison every probe, and one past kMaxPoseReach or
+    // with no axis to shine along is dark everywhere (the photons' rules): leave them out.
     std::erase_if(mLights, [](const Light& l) {
         return !isUsableLightPosition(l.position) || !isFinite(l.radiance) ||
+               (l.kind != Light::Kind::Point && l.direction == glm::vec3(0.f)) ||
                !isFinite(l.direction) || !std::isfinite(l.coneScale) ||
                !std::isfinite(l.coneOffset);
     });

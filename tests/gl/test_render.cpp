@@ -340,6 +340,24 @@ TEST_F(RenderTest, CornellBoxPointLightMatchesCpuReference) {
     expectHybridFrameMatchesReference("cornell_point", scene);
 }
 
+TEST_F(RenderTest, LightsWithNoAxisToShineAlongAreLeftDark) {
+    // A sun and a spot on nodes scaled to 0 along -Z have no direction: dark, as the photons
+    // leave them (the sun's normalised zero axis had put NaN on every lit pixel). The image is
+    // the reference's for the point light alone, which knows nothing of the two.
+    SceneBuilder scene(mWorld);
+    buildCornellBox(scene);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    const glm::mat4 flat = glm::translate(glm::mat4(1.f), glm::vec3(0.f, 1.5f, 0.f)) *
+                           glm::scale(glm::mat4(1.f), glm::vec3(1.f, 1.f, 0.f));
+    const Entity sun = mWorld.create();
+    mWorld.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 1.5f});
+    mWorld.emplace<WorldTransform>(sun, WorldTransform{flat});
+    const Entity spot = mWorld.create();
+    mWorld.emplace<SpotLight>(spot, SpotLight{glm::vec3(1.f), 5.f, 0.2f, 0.6f});
+    mWorld.emplace<WorldTransform>(spot, WorldTransform{flat});
+    expectHybridFrameMatchesReference("no_axis_lights", scene);
+}
+
 TEST_F(RenderTest, CornellBoxSpotAndDirectionalLightsMatchCpuReference) {
     SceneBuilder scene(mWorld);
     buildCornellBox(scene);

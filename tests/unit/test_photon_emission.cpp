@@ -417,6 +417,22 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
     bad.kind = EmitterKind::Directional;
     bad.world = glm::mat4(0.f);
     expectDark(bad);
+    bad.world = glm::scale(glm::mat4(1.f), glm::vec3(1.f, 1.f, 0.f)); // -Z collapsed
+    expectDark(bad);
+    // A huge scale keeps the axis (its length is taken in double, where float's overflowed
+    // and the light went dark as if it had none).
+    for (const EmitterKind kind : {EmitterKind::Spot, EmitterKind::Directional}) {
+        PhotonEmitter huge;
+        huge.kind = kind;
+        huge.radiant = glm::vec3(1.f);
+        huge.innerAngle = 0.2f;
+        huge.outerAngle = 0.4f;
+        huge.world = aimedAlong({0.f, -1.f, 0.f}, {0.f, 2.f, 0.f}) *
+                     glm::scale(glm::mat4(1.f), glm::vec3(1e20f));
+        prepareEmitter(registry, {glm::vec3(-1.f), glm::vec3(1.f)}, huge);
+        EXPECT_GT(huge.power.x, 0.f);
+        EXPECT_NEAR(huge.axis.y, -1.f, 1e-6f);
+    }
 }
 
 // ---- the system's share of photons among lights ---------------------------------------------

@@ -658,6 +658,29 @@ TEST(ShProbes, LightsPastThePosesReachAreLeftDarkAndCastNoRay) {
         ASSERT_EQ(std::memcmp(&a.coefficients(p), &b.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
 }
 
+TEST(ShProbes, LightsWithNoAxisToShineAlongAreLeftDark) {
+    // A spot and a sun on nodes scaled to 0 along their -Z axis: no direction, so dark (as
+    // the photons and the renderer leave them), not shining down a default axis. Photon mode,
+    // where the probes hold the lights themselves: bit for bit the floor alone.
+    FloorScene plain(floorSettings(false), grey(0.5f));
+    plain.run();
+    FloorScene scene(floorSettings(false), grey(0.5f));
+    const glm::mat4 flat = glm::translate(glm::mat4(1.f), glm::vec3(0.f, 1.f, 0.f)) *
+                           glm::scale(glm::mat4(1.f), glm::vec3(1.f, 1.f, 0.f));
+    const Entity spot = scene.world.create();
+    scene.world.emplace<WorldTransform>(spot, flat);
+    scene.world.emplace<SpotLight>(spot, SpotLight{glm::vec3(1.f), 100.f, 0.1f, 0.5f});
+    const Entity sun = scene.world.create();
+    scene.world.emplace<WorldTransform>(sun, glm::mat4(0.f));
+    scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
+    scene.run();
+    const ProbeVolume& a = plain.world.ctx().get<ProbeVolume>();
+    const ProbeVolume& b = scene.world.ctx().get<ProbeVolume>();
+    ASSERT_EQ(a.probeCount(), b.probeCount());
+    for (std::uint32_t p = 0; p < a.probeCount(); ++p)
+        ASSERT_EQ(std::memcmp(&a.coefficients(p), &b.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
+}
+
 TEST(ShProbes, ConstantEnvironmentGivesPiL) {
     // Nothing but sky: every probe's irradiance is pi L for every normal, within a bound that
     // holds for any rotation of the probe's rays (w = 4 pi / n per ray, Y_l the vector of
