@@ -6,7 +6,7 @@ namespace qgi {
 struct Camera {
     float yfov = 0.9f;    ///< vertical field of view, radians
     float znear = 0.05f;  ///< metres
-    float zfar = 500.f;   ///< metres
+    float zfar = 500.f;   ///< metres; +inf: no far plane (glTF's camera without zfar)
     bool active = false;  ///< the camera the renderer draws from
 };
 

@@ -44,6 +44,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <sstream>
 #include <unordered_map>
 
@@ -279,7 +280,8 @@ void exportGltf(const Registry& registry, const std::filesystem::path& path) {
         out.type = "perspective";
         out.perspective.yfov = camera->yfov;
         out.perspective.znear = camera->znear;
-        out.perspective.zfar = camera->zfar;
+        // No far plane: zfar absent (0 to tinygltf), as glTF writes an infinite projection.
+        out.perspective.zfar = std::isfinite(camera->zfar) ? camera->zfar : 0.0;
         model.nodes[std::size_t(node)].camera = int(model.cameras.size());
         model.cameras.push_back(std::move(out));
     }

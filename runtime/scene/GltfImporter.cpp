@@ -272,10 +272,10 @@ std::optional<Camera> GltfReader::readCamera(int index) const {
     Camera camera;
     camera.yfov = float(std::clamp(p.yfov, 1e-3, std::numbers::pi - 2e-3));
     camera.znear = float(std::max(p.znear, 1e-6));
-    if (p.zfar != 0.0)
-        camera.zfar = std::max(float(p.zfar), 1.001f * camera.znear);
-    else if (camera.zfar < 1.001f * camera.znear) // absent (infinite): the component's
-        camera.zfar = 1e4f * camera.znear;        // default, unless znear is beyond it
+    // An absent zfar is glTF's infinite projection: nothing beyond a set distance is cut off,
+    // however large the level.
+    camera.zfar = p.zfar != 0.0 ? std::max(float(p.zfar), 1.001f * camera.znear)
+                                : std::numeric_limits<float>::infinity();
     if (camera.yfov != float(p.yfov) || camera.znear != float(p.znear) ||
         (p.zfar != 0.0 && camera.zfar != float(p.zfar)))
         logWarning(mLabel, ": ", field, ".perspective: adjusted to yfov ", camera.yfov, ", znear ",

@@ -326,7 +326,9 @@ bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) co
         pose[c] /= length;
     }
     camera.view = glm::inverse(pose);
-    camera.projection = glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar);
+    camera.projection = std::isfinite(chosen->zfar)
+                            ? glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar)
+                            : glm::infinitePerspective(chosen->yfov, aspect, chosen->znear);
     camera.position = glm::vec3(chosenWorld->matrix[3]);
     return true;
 }

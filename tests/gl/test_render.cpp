@@ -340,6 +340,16 @@ TEST_F(RenderTest, CornellBoxPointLightMatchesCpuReference) {
     expectHybridFrameMatchesReference("cornell_point", scene);
 }
 
+TEST_F(RenderTest, ACameraWithoutAFarPlaneDrawsAsOneWithIt) {
+    // zfar +inf (a glTF camera without zfar): an infinite projection, the same image.
+    SceneBuilder scene(mWorld);
+    buildCornellBox(scene);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    mWorld.view<Camera>().each(
+        [](Camera& camera) { camera.zfar = std::numeric_limits<float>::infinity(); });
+    expectHybridFrameMatchesReference("no_far_plane", scene);
+}
+
 TEST_F(RenderTest, LightsWithNoAxisToShineAlongAreLeftDark) {
     // A sun and a spot on nodes scaled to 0 along -Z have no direction: dark, as the photons
     // leave them (the sun's normalised zero axis had put NaN on every lit pixel). The image is

@@ -27,6 +27,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <limits>
 
 namespace qgi {
 namespace {
@@ -112,6 +113,8 @@ void buildScene(Registry& r) {
 
     // The inactive camera comes first: activity must survive, not order.
     r.emplace<Camera>(addNode(r, "Wide", Transform{}), Camera{1.2f, 0.2f, 300.f, false});
+    r.emplace<Camera>(addNode(r, "Open", Transform{}),
+                      Camera{1.f, 0.1f, std::numeric_limits<float>::infinity(), false});
     Transform eye;
     eye.translation = {0, 1.7f, 6};
     r.emplace<Camera>(addNode(r, "Main", eye), Camera{0.7f, 0.1f, 50.f, true});
@@ -250,6 +253,9 @@ TEST_P(GltfExport, RoundTripPreservesTheScene) {
     EXPECT_FALSE(wide.active);
     EXPECT_EQ(wide.yfov, 1.2f);
     EXPECT_EQ(wide.zfar, 300.f);
+    // No far plane: written without zfar, read back as none.
+    EXPECT_EQ(imported.get<Camera>(entityNamed(imported, "Open")).zfar,
+              std::numeric_limits<float>::infinity());
 
     // The texture is embedded as PNG: lossless.
     const auto& images = imported.ctx().get<TextureLibrary>().images;

@@ -31,6 +31,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -257,7 +258,9 @@ TEST(GltfImport, LightsCamerasMobilityAndEmissiveStrength) {
     EXPECT_FALSE(side.active);
     EXPECT_FLOAT_EQ(side.yfov, 1.f);
     EXPECT_FLOAT_EQ(side.znear, 0.5f);
-    EXPECT_EQ(side.zfar, Camera{}.zfar); // no zfar in the file: infinite, the default stands in
+    // No zfar in the file: glTF's infinite projection (500 m, the component's default, had cut
+    // off everything past it in a large level).
+    EXPECT_EQ(side.zfar, std::numeric_limits<float>::infinity());
 
     // Mobility: Crate says mobile, Lid inherits it, Bolt overrides it, Lamp has the default.
     const auto tags = [&](std::string_view name) {
