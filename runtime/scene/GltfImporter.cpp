@@ -19,6 +19,7 @@
 #include "runtime/scene/SceneLoader.h"
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtx/component_wise.hpp>
@@ -303,13 +304,15 @@ Light GltfReader::readLight(int index) const {
     if (l.type == "point") return PointLight{color, intensity};
     if (l.type == "directional") return DirectionalLight{color, intensity};
     if (l.type != "spot") fail(field + ".type", "'", l.type, "' is not point, spot or directional");
-    const double inner = l.spot.innerConeAngle;
-    const double outer = l.spot.outerConeAngle;
-    if (!(outer > 0.0 && outer <= std::numbers::pi / 2))
-        fail(field + ".spot.outerConeAngle", outer, " is not in (0, pi/2]");
-    if (!(inner >= 0.0 && inner < outer))
-        fail(field + ".spot.innerConeAngle", inner, " is not in [0, outerConeAngle)");
-    return SpotLight{color, intensity, float(inner), float(outer)};
+    // Checked as the floats the lights systems read: cones apart in double can meet in float.
+    const float inner = float(l.spot.innerConeAngle);
+    const float outer = float(l.spot.outerConeAngle);
+    if (!(outer > 0.f && outer <= glm::half_pi<float>()))
+        fail(field + ".spot.outerConeAngle", l.spot.outerConeAngle, " is not in (0, pi/2]");
+    if (!(inner >= 0.f && inner < outer))
+        fail(field + ".spot.innerConeAngle", l.spot.innerConeAngle,
+             " is not in [0, outerConeAngle) (compared as 32-bit floats)");
+    return SpotLight{color, intensity, inner, outer};
 }
 
 std::vector<int> GltfReader::checkNodeGraph() const {
@@ -359,10 +362,12 @@ float GltfReader::sceneExposure() const {
     const tinygltf::Value& extras = mModel.scenes[std::size_t(index)].extras;
     if (!extras.IsObject() || !extras.Has("exposure")) return 1.f;
     const tinygltf::Value& exposure = extras.Get("exposure");
-    const double value = exposure.IsNumber() ? exposure.GetNumberAsDouble() : -1.0;
-    if (!(value > 0.0 && value <= 1e6))
-        fail(str("scenes[", index, "].extras.exposure"), "must be a number in (0, 1e6]");
-    return float(value);
+    // Checked as the float it becomes: 1e-300 is positive in double but 0 in float.
+    const float value = exposure.IsNumber() ? float(exposure.GetNumberAsDouble()) : -1.f;
+    if (!(value > 0.f && value <= 1e6f))
+        fail(str("scenes[", index, "].extras.exposure"),
+             "must be a number in (0, 1e6] (as a 32-bit float)");
+    return value;
 }
 
 std::vector<int> GltfReader::sceneRoots(const std::vector<int>& parents) const {

@@ -376,7 +376,7 @@ TEST(GltfBadInput, ASceneExposureThatIsNoPositiveNumberIsNamed) {
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     const std::string from = R"("scenes": [)";
     ASSERT_NE(text.find(from), std::string::npos);
-    for (const char* exposure : {R"("bright")", "-1", "0"}) {
+    for (const char* exposure : {R"("bright")", "-1", "0", "1e-300"}) {
         std::string edited = text;
         const std::size_t scene = edited.find("{", edited.find(from));
         edited.insert(scene + 1, std::string(R"("extras": {"exposure": )") + exposure + "}, ");
@@ -387,6 +387,21 @@ TEST(GltfBadInput, ASceneExposureThatIsNoPositiveNumberIsNamed) {
                     HasSubstr("scenes[0].extras.exposure"))
             << exposure;
     }
+}
+
+TEST(GltfBadInput, SpotConesThatMeetAsFloatsAreNamed) {
+    // Apart in double, one float apart or equal as the lights systems read them: the photons
+    // would leave such a spot dark while the renderer drew it.
+    std::ifstream in(kData / "good" / "lights.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string from = R"("innerConeAngle": 0.2)";
+    ASSERT_NE(text.find(from), std::string::npos);
+    std::string edited = text;
+    edited.replace(edited.find(from), from.size(), R"("innerConeAngle": 0.59999999999)");
+    std::ofstream(scratchFile("spot.gltf")) << edited;
+    const std::string message = importFailure(scratchFile("spot.gltf"));
+    EXPECT_THAT(message, HasSubstr("extensions.KHR_lights_punctual.lights[1].spot.innerConeAngle"));
+    EXPECT_THAT(message, HasSubstr("32-bit floats"));
 }
 
 TEST(GltfBadInput, AStrideOutOfRangeIsNamedWithItsRange) {
