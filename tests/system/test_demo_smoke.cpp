@@ -594,11 +594,22 @@ TEST(DemoSmoke, CameraPathsAreReadStrictly) {
          {std::tuple{"garbage.csv", "hello world\n0,0,0.3,1,0,0\n", "expected six numbers"},
           std::tuple{"seven.csv", "0,0,0.3,1,0,0,7\n", "expected six numbers"},
           std::tuple{"pitch.csv", "0,0,0.3,1,0,95\n", "past straight up or down"},
-          std::tuple{"backwards.csv", "1,0,0.3,1,0,0\n0,0,0.3,1,0,0\n", "times must increase"}}) {
+          std::tuple{"backwards.csv", "1,0,0.3,1,0,0\n0,0,0.3,1,0,0\n", "times must increase"},
+          std::tuple{"word.csv", "0,0,0.3,1,0,0\n1,0,up,1,0,0\n",
+                     "word.csv:2: y 'up' is not a number"},
+          std::tuple{"huge.csv", "0,0,0.3,1,0,1e39\n",
+                     "pitch_deg '1e39' is out of a 32-bit float's range"},
+          std::tuple{"far.csv", "0,0,1e30,1,0,0\n", "y 1e+30 m is farther from the origin"}}) {
         const RunResult result = run(name, text);
         EXPECT_EQ(result.exitCode, 1) << name << ": " << result.output;
         EXPECT_NE(result.output.find(says), std::string::npos) << name << ": " << result.output;
     }
+    // As a spreadsheet saves it: a byte-order mark, a header, Windows line ends.
+    const RunResult excel = run("excel.csv", "\xEF\xBB\xBFtime,x,y,z,yaw_deg,pitch_deg\r\n"
+                                             "0,0,0.3,1,0,0\r\n+1,0.1,0.3,1,10,-5\r\n");
+    ASSERT_EQ(excel.exitCode, 0) << excel.output;
+    EXPECT_TRUE(readExr((dir / "excel.csv.exr").string()).rgba == good.rgba)
+        << "not good.csv's path";
     const RunResult folder = runDemo("--scene cornell --headless --frames 1 --photons 0 --vlf off "
                                      "--camera-path " +
                                      dir.string());
