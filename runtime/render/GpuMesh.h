@@ -4,6 +4,7 @@
 #include "runtime/render/GlHandle.h"
 #include "runtime/scene/SceneInfo.h"
 
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include <cstdint>
@@ -35,6 +36,11 @@ struct GpuMesh {
     std::uint32_t indexCount = 0;
     Aabb bounds;       ///< object space
     bool drawn = true; ///< whether it was drawn last frame (a MobileMesh can be out of the world)
+    /// The last pose it was drawn at that isUsablePose() accepted (runtime/math/Pose.h), and
+    /// whether there was one: a pose past the rule keeps the mesh there, as the ray scene
+    /// keeps it, instead of stretching the shadow maps' bounds over 1e20 m.
+    glm::mat4 pose{1.f};
+    bool posed = false;
 };
 
 /// Uploads a mesh (the caller has checked that every attribute has one entry per position).

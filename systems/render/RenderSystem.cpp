@@ -122,8 +122,12 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
         // mesh stays for later and takes its irradiance uploads meanwhile.
         const bool drawn = !outOfWorld(registry, e);
         if (registry.wasChanged<WorldTransform>(e) || drawn != gpuMesh.drawn) casterChanged = true;
-        gpuMesh.drawn = drawn;
-        if (!drawn) {
+        if (isUsablePose(world.matrix)) {
+            gpuMesh.pose = world.matrix;
+            gpuMesh.posed = true;
+        }
+        gpuMesh.drawn = drawn && gpuMesh.posed;
+        if (!gpuMesh.drawn) {
             if (irradiance && !irradiance->dirty.empty())
                 uploadIrradiance(gpuMesh, irradiance->irradiance, irradiance->dirty);
             return;
@@ -131,7 +135,7 @@ void RenderSystem::syncMeshes(Registry& registry, GpuResources& gpu, RenderScene
 
         DrawItem& item = mItems.emplace_back();
         item.mesh = &gpuMesh;
-        item.model = world.matrix;
+        item.model = gpuMesh.pose;
         item.movable = movable;
         const Material* material = registry.tryGet<Material>(e);
         const Material m = material ? *material : Material{};

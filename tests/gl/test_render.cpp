@@ -501,6 +501,23 @@ TEST_F(RenderTest, MovingMobileRefreshesOnlyItsShadows) {
     expectMatchesReference("cornell_mobile", renderer.readHdr(), scene.reference(), scene.range(s));
 }
 
+TEST_F(RenderTest, APoseOutOfReachLeavesTheMobileWhereItWas) {
+    // A mobile sent 1e20 m away (a runaway animation) stays at its last usable pose, as the
+    // ray scene keeps it (runtime/math/Pose.h): before, the shadow maps' bounds took it in,
+    // their extent overflowed and the whole frame went black.
+    SceneBuilder scene(mWorld);
+    const Entity block = buildCornellBox(scene);
+    mWorld.emplace<MobileMesh>(block);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer);
+    mWorld.patch<WorldTransform>(block).matrix =
+        glm::translate(glm::mat4(1.f), glm::vec3(1e20f, 0.f, 0.f)) * kBlockPose;
+    renderFrames(renderer);
+    expectMatchesReference("pose_out_of_reach", renderer.readHdr(), scene.reference(),
+                           scene.range(settings(ShadingMode::Hybrid)));
+}
+
 TEST_F(RenderTest, AnInactiveMobileRendersAsIfItWereNotThere) {
     // The block is a mobile. Taken out (MobileMesh::active), the frame must be the one drawn
     // with the block destroyed: no block, no shadow of it. Put back, the first frame again.
