@@ -329,6 +329,9 @@ bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) co
         if (!(length > 1e-20f) || !std::isfinite(length)) return false;
         pose[c] /= length;
     }
+    // A mirror on its node (scale -1 along an axis) would turn every triangle's winding, and
+    // culling would leave the frame black: it sees along -Z with +Y up all the same.
+    if (glm::determinant(glm::mat3(pose)) < 0.f) pose[0] = -pose[0];
     camera.view = glm::inverse(pose);
     camera.projection = std::isfinite(chosen->zfar)
                             ? glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar)

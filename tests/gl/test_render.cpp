@@ -350,6 +350,21 @@ TEST_F(RenderTest, ACameraWithoutAFarPlaneDrawsAsOneWithIt) {
     expectHybridFrameMatchesReference("no_far_plane", scene);
 }
 
+TEST_F(RenderTest, AMirroredCameraSeesWhatItsUnmirroredPoseSees) {
+    // A camera node mirrored along x (scaled too): the same view along its -Z, Y up (a mirror
+    // had turned every triangle's winding, and culling left the frame black).
+    SceneBuilder scene(mWorld);
+    buildCornellBox(scene);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    for (const glm::vec3 mirror : {glm::vec3(-1.f, 1.f, 1.f), glm::vec3(-2.f, 2.f, 2.f)}) {
+        mWorld.view<Camera, WorldTransform>().each([&](Camera&, WorldTransform& world) {
+            world.matrix = glm::translate(glm::mat4(1.f), glm::vec3(world.matrix[3])) *
+                           glm::scale(glm::mat4(1.f), mirror);
+        });
+        expectHybridFrameMatchesReference("mirrored_camera", scene);
+    }
+}
+
 TEST_F(RenderTest, LightsWithNoAxisToShineAlongAreLeftDark) {
     // A sun and a spot on nodes scaled to 0 along -Z have no direction: dark, as the photons
     // leave them (the sun's normalised zero axis had put NaN on every lit pixel). The image is
