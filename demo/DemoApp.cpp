@@ -58,8 +58,9 @@ namespace qgi::demo {
 namespace {
 
 /// A scene without a camera (a level from a tool that keeps its cameras elsewhere) gets one
-/// beyond the +Z side of its bounds, a little above the middle, looking at the centre from far
-/// enough to see the whole scene.
+/// beyond the +Z side of its bounds, above the middle, looking at the centre from far enough
+/// to see the whole scene: at least 20 degrees down, so that a flat level (a floor, a
+/// terrain) is not seen edge-on.
 Entity addDefaultCamera(Registry& registry) {
     const Aabb& bounds = registry.ctx().get<SceneInfo>().bounds;
     const glm::vec3 center = bounds.empty() ? glm::vec3(0.f) : bounds.center();
@@ -68,7 +69,9 @@ Entity addDefaultCamera(Registry& registry) {
     camera.active = true;
     const float radius = std::max(0.5f * glm::length(extent), 0.01f);
     const float distance = radius / std::tan(0.5f * camera.yfov);
-    const glm::vec3 eye = center + glm::vec3(0.f, 0.25f * extent.y, 0.5f * extent.z + distance);
+    const float back = 0.5f * extent.z + distance;
+    const float up = std::max(0.25f * extent.y, std::tan(glm::radians(20.f)) * back);
+    const glm::vec3 eye = center + glm::vec3(0.f, up, back);
     camera.znear = std::max(1e-3f * distance, 1e-3f);
     camera.zfar = std::max(camera.zfar, 4.f * (distance + radius));
     Transform pose;

@@ -626,6 +626,21 @@ TEST(DemoSmoke, SceneWithoutCameraGetsADefaultOne) {
     ASSERT_EQ(run.exitCode, 0) << run.output;
     EXPECT_NE(run.output.find("no camera"), std::string::npos) << run.output;
     EXPECT_EQ(readPng(base + ".png").width, 64);
+    // A flat level (a lit floor, y = 0) is seen from above, not edge-on (a black frame): the
+    // floor fills a band a few rows above and below the middle, where an edge-on view has
+    // nothing.
+    const fs::path floor =
+        fs::path(QGI_TEST_DATA_DIR) / "gltf" / "unusual" / "flat_floor_no_camera.gltf";
+    const std::string floorBase = (scratchDir() / "flat_floor").string();
+    const RunResult flat = runDemo("--headless --frames 2 --width 64 --height 48 --photons 1000 "
+                                   "--vlf off --scene " +
+                                   floor.string() + " --screenshot " + floorBase);
+    ASSERT_EQ(flat.exitCode, 0) << flat.output;
+    const ImageF image = readExr(floorBase + ".exr");
+    for (const int row : {image.height / 2 - 2, image.height / 2 + 2}) {
+        const std::size_t pixel = (std::size_t(row) * image.width + image.width / 2) * 4;
+        EXPECT_GT(image.rgba[pixel], 0.f) << "the floor is not in view at row " << row;
+    }
 }
 
 TEST(DemoSmoke, MissingSceneFileIsNamedInTheError) {
