@@ -562,6 +562,12 @@ std::vector<EntityRecord> GltfReader::traverse(const std::vector<int>& roots) {
         const int self = int(records.size());
         mNodeRecord[std::size_t(index)] = self;
         warnMisspeltExtras(index);
+        {
+            // Checked on every node, animated or not: a malformed tag is an error wherever it
+            // is, not only where an animation happens to read it.
+            PathFollower unused;
+            readPathExtras(index, unused);
+        }
         bool hidden = false; // a mesh node scaled to nothing
         {
             EntityRecord record;

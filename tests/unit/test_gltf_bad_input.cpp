@@ -389,6 +389,27 @@ TEST(GltfBadInput, ASceneExposureThatIsNoPositiveNumberIsNamed) {
     }
 }
 
+TEST(GltfBadInput, AMalformedPathTagIsNamedOnANodeWithoutAnimation) {
+    // The tag is read where an animation drives the node, but checked on every node: a file
+    // that loads must not hold a tag that breaks once an animation is added.
+    std::ifstream in(kData / "good" / "triangle.gltf");
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string from = R"("name": "Triangle",)";
+    ASSERT_NE(text.find(from), std::string::npos);
+    for (const auto& [tag, field] :
+         {std::pair{R"("yes")", "nodes[0].extras.qgiPath"},
+          std::pair{R"({"loop": "no"})", "nodes[0].extras.qgiPath.loop"},
+          std::pair{R"({"timeOffset": "soon"})", "nodes[0].extras.qgiPath.timeOffset"}}) {
+        std::string edited = text;
+        edited.replace(edited.find(from), from.size(),
+                       from + R"( "extras": {"qgiPath": )" + tag + "},");
+        std::ofstream(scratchFile("path_tag.gltf")) << edited;
+        fs::copy_file(kData / "good" / "triangle.bin", scratchFile("triangle.bin"),
+                      fs::copy_options::overwrite_existing);
+        EXPECT_THAT(importFailure(scratchFile("path_tag.gltf")), HasSubstr(field)) << tag;
+    }
+}
+
 TEST(GltfBadInput, SpotConesThatMeetAsFloatsAreNamed) {
     // Apart in double, one float apart or equal as the lights systems read them: the photons
     // would leave such a spot dark while the renderer drew it.
