@@ -796,7 +796,9 @@ void GltfReader::processMeshes(ImportedScene& scene) const {
             fail(r.source->field, "the scene holds more than ", kSceneMaxTriangles,
                  " triangles after refinement (instances counted); raise the edge bound");
         if (it->second.indices.empty()) {
-            logWarning(mLabel, ": ", r.source->field, ": no triangles with area; skipped");
+            // Instances of one mesh differ by their scale: name the node too.
+            logWarning(mLabel, ": ", r.source->field, " under node '", r.name,
+                       "': no triangles with area at its scale; skipped");
             continue;
         }
         r.mesh = it->second;
