@@ -316,14 +316,16 @@ void RenderSystem::collectLights(const Registry& registry) {
         });
 }
 
-bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) const {
+bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) {
     const Entity entity = findActiveCamera(registry);
     const Camera* chosen = registry.tryGet<Camera>(entity);
     const WorldTransform* chosenWorld = registry.tryGet<WorldTransform>(entity);
     if (!chosen || !chosenWorld) return false;
     const float aspect = float(settings().width) / float(settings().height);
+    if (isUsablePose(chosenWorld->matrix)) mCameraPose = chosenWorld->matrix;
+    if (!mCameraPose) return false;
     // A camera sees along its pose; a scale on its node would only distort the view.
-    glm::mat4 pose = chosenWorld->matrix;
+    glm::mat4 pose = *mCameraPose;
     for (int c = 0; c < 3; ++c) {
         const float length = glm::length(glm::vec3(pose[c]));
         if (!(length > 1e-20f) || !std::isfinite(length)) return false;
@@ -336,7 +338,7 @@ bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) co
     camera.projection = std::isfinite(chosen->zfar)
                             ? glm::perspective(chosen->yfov, aspect, chosen->znear, chosen->zfar)
                             : glm::infinitePerspective(chosen->yfov, aspect, chosen->znear);
-    camera.position = glm::vec3(chosenWorld->matrix[3]);
+    camera.position = glm::vec3(pose[3]);
     return true;
 }
 

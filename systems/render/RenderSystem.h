@@ -68,7 +68,7 @@ public:
 private:
     void syncMeshes(Registry& registry, GpuResources& gpu, RenderScene& scene);
     void collectLights(const Registry& registry);
-    bool findCamera(const Registry& registry, RenderCamera& camera) const;
+    bool findCamera(const Registry& registry, RenderCamera& camera);
     void sortFrontToBack(const glm::vec3& eye);
     GLuint baseColorTexture(const Registry& registry, GpuResources& gpu, int index);
     void writeScreenshot(const std::filesystem::path& base);
@@ -89,6 +89,10 @@ private:
     std::uint64_t mCacheVersion = ~0ull;   ///< its shadingVersion at the last upload
     std::vector<glm::vec4> mCacheStaging;
     bool mWarnedNoCamera = false;
+    /// The camera's last pose that isUsablePose() accepted: a pose past it (a runaway camera
+    /// animation at 1e30 m, where nothing can be seen) keeps the view there, as meshes keep
+    /// theirs.
+    std::optional<glm::mat4> mCameraPose;
     bool mWarnedTexture = false;
     VlfGpuTables mVlf;
     const void* mVlfSource = nullptr; ///< the VlfField the tables were built from

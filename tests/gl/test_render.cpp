@@ -533,6 +533,22 @@ TEST_F(RenderTest, APoseOutOfReachLeavesTheMobileWhereItWas) {
                            scene.range(settings(ShadingMode::Hybrid)));
 }
 
+TEST_F(RenderTest, ACameraPoseOutOfReachKeepsTheLastView) {
+    // A camera animation that runs off to 1e30 m (where nothing could be seen) keeps the view
+    // at the last usable pose.
+    SceneBuilder scene(mWorld);
+    buildCornellBox(scene);
+    scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
+    RenderSystem renderer(settings(ShadingMode::Hybrid));
+    renderFrames(renderer);
+    mWorld.view<Camera, WorldTransform>().each([](Camera&, WorldTransform& world) {
+        world.matrix = glm::translate(glm::mat4(1.f), glm::vec3(0.f, 1e30f, 0.f));
+    });
+    renderFrames(renderer);
+    expectMatchesReference("camera_out_of_reach", renderer.readHdr(), scene.reference(),
+                           scene.range(settings(ShadingMode::Hybrid)));
+}
+
 TEST_F(RenderTest, AnInactiveMobileRendersAsIfItWereNotThere) {
     // The block is a mobile. Taken out (MobileMesh::active), the frame must be the one drawn
     // with the block destroyed: no block, no shadow of it. Put back, the first frame again.
