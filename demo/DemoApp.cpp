@@ -29,6 +29,7 @@
 #include "systems/frame/FrameSchedule.h"
 #include "systems/point_cache/PointCacheFile.h"
 #include "systems/sh_probes/AvatarShExport.h"
+#include "systems/vlf/Vlf.h"
 #include "systems/vlf/VlfCache.h"
 #include "systems/vlf/VlfScene.h"
 
@@ -279,6 +280,19 @@ std::filesystem::path cacheFileOf(const std::string& option, const char* name,
     return file;
 }
 
+/// The frame schedule; a VLF beyond the machine's memory or the GL limit (found before its
+/// bake) is told in the demo's own options.
+FrameSchedule buildSchedule(Registry& world, const FrameSettings& settings,
+                            const DemoOptions& options) {
+    try {
+        return FrameSchedule(world, settings);
+    } catch (const vlf::VlfTooLarge& e) {
+        fail("--vlf-level ", options.vlfLevel, " --vlf-lines ", options.vlfLines,
+             ": the VLF of this scene ", e.detail, "; lower --vlf-level or --vlf-lines",
+             options.vlf == "auto" ? " (or --vlf off)" : "");
+    }
+}
+
 } // namespace
 
 int runDemo(const DemoOptions& options) {
@@ -399,7 +413,7 @@ int runDemo(const DemoOptions& options) {
     render.mode = options.mode == "photon" ? ShadingMode::Photon : ShadingMode::Hybrid;
     render.exposure =
         options.exposure > 0.f ? options.exposure : world.ctx().get<SceneInfo>().exposure;
-    FrameSchedule frame(world, frameSettings);
+    FrameSchedule frame = buildSchedule(world, frameSettings, options);
     const GlfwInput input(window.handle());
     FlyController controller(input);
     if (frame.renderer()) frame.renderer()->setShowPointCache(options.showPoints);

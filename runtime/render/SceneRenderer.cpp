@@ -41,8 +41,7 @@ static_assert(offsetof(GpuLightBlock, count) == 64 * kMaxShadowLayers);
 static_assert(offsetof(GpuLightBlock, lights) % 16 == 0);
 
 RenderSettings validated(const RenderSettings& s) {
-    GLint maxSize = 0;
-    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
+    const int maxSize = SceneRenderer::maxTextureSize();
     if (s.width <= 0 || s.height <= 0 || s.width > maxSize || s.height > maxSize)
         fail("render setting width x height = ", s.width, "x", s.height, " is outside 1..",
              maxSize);
@@ -251,6 +250,12 @@ void SceneRenderer::drawScene(const RenderScene& scene) {
     }
 }
 
+int SceneRenderer::maxTextureSize() {
+    GLint maxSize = 0;
+    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
+    return maxSize;
+}
+
 void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
     const auto upload = [](GlBuffer& buffer, const void* data, std::size_t bytes) {
         buffer = createBuffer();
@@ -264,16 +269,17 @@ void SceneRenderer::uploadVlf(const VlfGpuTables& vlf) {
     upload(mVlfBuffers[2], vlf.faces.data(), vlf.faces.size() * sizeof(glm::vec4));
     upload(mVlfBuffers[3], vlf.blocks.data(), vlf.blocks.size() * sizeof(glm::ivec4));
     upload(mVlfBuffers[4], vlf.slots.data(), vlf.slots.size() * sizeof(std::int32_t));
-    // Tile atlas: kVlfAtlasTiles tiles of m x m cells per row.
+    // Tile atlas: kVlfAtlasTiles tiles of m x m cells per row. The bake checked the size
+    // against the limit already (VlfSettings::maxAtlasSize) when FrameSchedule set it; a field
+    // from elsewhere is checked here.
     const int m = std::max(vlf.tileSize, 1);
     const std::size_t tiles = vlf.cells.size() / std::size_t(m * m);
-    const int width = kVlfAtlasTiles * m;
-    const int rows = int(std::max<std::size_t>(1, (tiles + kVlfAtlasTiles - 1) / kVlfAtlasTiles));
-    GLint maxSize = 0;
-    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &maxSize);
-    if (width > maxSize || rows * m > maxSize)
-        fail("VLF tile atlas of ", width, "x", rows * m, " texels exceeds the GL limit ", maxSize,
-             " (fewer directions or lines, or smaller tiles)");
+    const VlfAtlasSize atlas = vlfAtlasSize(tiles, m);
+    const int maxSize = maxTextureSize();
+    if (atlas.width > maxSize || atlas.height > maxSize)
+        fail("VLF tile atlas of ", atlas.width, "x", atlas.height, " texels exceeds the GL limit ",
+             maxSize, " (fewer directions or lines, or smaller tiles)");
+    const int width = int(atlas.width), rows = int(atlas.height) / m;
     std::vector<glm::u16vec4> texels(std::size_t(width) * std::size_t(rows * m),
                                      glm::u16vec4(0)); // half floats: 0 is +0
     for (std::size_t t = 0; t < tiles; ++t) {

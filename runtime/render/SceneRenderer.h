@@ -26,6 +26,9 @@ class SceneRenderer {
 public:
     /// Throws qgi::Error naming the setting for bad settings, or for a shader that fails.
     explicit SceneRenderer(const RenderSettings& settings);
+    /// GL_MAX_TEXTURE_SIZE of the current context: the largest render target, shadow map and
+    /// VLF tile atlas side, texels.
+    static int maxTextureSize();
 
     void render(const RenderScene& scene, FrameProfiler* profiler, std::uint64_t frameIndex);
 

@@ -1,5 +1,7 @@
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <string>
 
 namespace qgi {
@@ -49,6 +51,19 @@ constexpr int kPointCacheCellPointsBinding = 0;
 // directional light 1).
 constexpr int kMaxLights = 64;
 constexpr int kMaxShadowLayers = 32;
+
+/// Size in texels of the VLF tile atlas holding `tiles` tiles of tileSize x tileSize cells:
+/// kVlfAtlasTiles tiles a row, at least one row. The renderer lays the atlas out by it, and
+/// the VLF checks it against the GL limit before its bake, so the two cannot disagree.
+struct VlfAtlasSize {
+    std::int64_t width = 0, height = 0;
+};
+inline VlfAtlasSize vlfAtlasSize(std::size_t tiles, int tileSize) {
+    const std::int64_t m = tileSize > 1 ? tileSize : 1;
+    const std::int64_t rows =
+        tiles > 0 ? (std::int64_t(tiles) + kVlfAtlasTiles - 1) / kVlfAtlasTiles : 1;
+    return {kVlfAtlasTiles * m, rows * m};
+}
 
 } // namespace shader
 

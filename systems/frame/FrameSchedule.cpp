@@ -7,6 +7,7 @@
 #include "runtime/core/Log.h"
 #include "runtime/profile/FrameProfiler.h"
 #include "runtime/raytrace/RayScene.h"
+#include "runtime/render/SceneRenderer.h"
 #include "runtime/scene/SceneInfo.h"
 #include "runtime/scene/SceneQueries.h"
 
@@ -50,7 +51,12 @@ FrameSchedule::FrameSchedule(Registry& registry, const FrameSettings& settings)
         mIrradiance->build(registry);
     }
     if (settings.vlf) {
-        mVlf = std::make_unique<VlfSystem>(*settings.vlf);
+        VlfSystemSettings vlf = *settings.vlf;
+        // The renderer holds the field's tiles in one texture: a field too large for this GL
+        // context fails before its bake, not minutes later at the upload.
+        if (settings.render && vlf.bake.maxAtlasSize == 0)
+            vlf.bake.maxAtlasSize = SceneRenderer::maxTextureSize();
+        mVlf = std::make_unique<VlfSystem>(vlf);
         FrameProfiler::Scope scope(&registry.ctx().get<FrameProfiler>(), "load.vlf");
         mVlf->build(registry);
     }

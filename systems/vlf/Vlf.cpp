@@ -2,6 +2,7 @@
 
 #include "runtime/core/Error.h"
 #include "runtime/core/Hash.h"
+#include "runtime/render/ShaderInterface.h"
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/packing.hpp>
@@ -142,21 +143,28 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     for (Face& f : v.mFaces)
         f.triangles.clear();
 
-    // Settings within their ranges can still ask for more than the machine has: say so before
-    // the big arrays (the texel maps first, then everything).
+    // Settings within their ranges can still ask for more than the machine has, or for a tile
+    // atlas larger than the renderer can hold: the layout (face maps, tile blocks, which tiles
+    // are hit) is cheap and fixes every count, so both limits are checked from it before the
+    // large arrays and long before the bake.
     const double limit = settings.maxBakeBytes > 0 ? double(settings.maxBakeBytes)
                                                    : 0.5 * double(::sysconf(_SC_PHYS_PAGES)) *
                                                          double(::sysconf(_SC_PAGESIZE));
-    const auto tooBig = [&](double bytes) {
-        fail("VLF: baking ", v.mDirections->size(), " directions at ", settings.linesPerSide, "x",
-             settings.linesPerSide, " lines (direction level ", settings.directionLevel,
-             ") needs about ", bytes / 1e9, " GB, over the ", limit / 1e9,
-             " GB allowed (VlfSettings.maxBakeBytes; by default half of this machine's memory): "
-             "lower the direction level or the lines per side");
+    const std::string baking =
+        str("VLF: baking ", l, " directions at ", settings.linesPerSide, "x", settings.linesPerSide,
+            " lines (direction level ", settings.directionLevel, ") ");
+    const auto checkMemory = [&](const VlfMemory& need) {
+        if (limit <= 0.0 || double(need.bakeBytes) <= limit) return;
+        const std::string detail =
+            str("needs about ", double(need.bakeBytes) / 1e9, " GB, over the ", limit / 1e9,
+                " GB allowed", settings.maxBakeBytes > 0 ? "" : " (half of this machine's memory)");
+        throw VlfTooLarge(VlfTooLarge::Limit::Memory, detail,
+                          str(baking, detail,
+                              " (VlfSettings.maxBakeBytes; by default half of this machine's "
+                              "memory): lower the direction level or the lines per side"));
     };
 
-    // Irradiance maps with the exact fraction of each texel inside the face: every triangle,
-    // in texel units, clipped against the texels its bounds touch.
+    // Irradiance maps: each face's bounding rectangle in texels.
     const float texel = settings.texelCells * v.cellWidth() * v.mRadius;
     std::uint64_t texels = 0;
     for (const Face& f : v.mFaces) {
@@ -172,42 +180,10 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
                  " faces at ", texel, " m a texel): raise VlfSettings.texelCells");
         v.mFaceMaps.push_back(m);
     }
-    // The texel arrays alone, as memory() counts them for the bake.
-    const double texelBytes =
-        double(texels) * double(sizeof(float) + (3 + std::min(kBakeChunks, l)) * sizeof(glm::vec3));
-    if (limit > 0.0 && texelBytes > limit) tooBig(texelBytes);
-    v.mCoverage.assign(texels, 0.f);
-    v.mIrradiance.assign(texels, glm::vec3(0.f));
-    for (std::size_t fi = 0; fi < scene.faces().size(); ++fi) {
-        const Face& f = scene.faces()[fi];
-        const FaceMap& m = v.mFaceMaps[fi];
-        std::vector<double> area(std::size_t(m.width) * m.height, 0.0);
-        for (std::uint32_t ti : f.triangles) {
-            const VlfScene::Triangle& t = scene.triangles()[ti];
-            std::array<glm::dvec2, 3> q;
-            int k = 0;
-            for (const glm::vec3& p : {t.p0, t.p1, t.p2})
-                q[k++] = glm::dvec2(double(glm::dot(p - f.origin, f.axisU)) / m.texelU,
-                                    double(glm::dot(p - f.origin, f.axisV)) / m.texelV);
-            const glm::dvec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
-            const glm::dvec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
-            const int x0 = std::max(0, int(std::floor(lo.x))),
-                      x1 = std::min(int(m.width) - 1, int(std::floor(hi.x)));
-            const int y0 = std::max(0, int(std::floor(lo.y))),
-                      y1 = std::min(int(m.height) - 1, int(std::floor(hi.y)));
-            for (int y = y0; y <= y1; ++y)
-                for (int x = x0; x <= x1; ++x)
-                    area[std::size_t(y) * m.width + x] +=
-                        clippedArea(q, glm::dvec2(x, y), glm::dvec2(x + 1, y + 1));
-        }
-        // Triangles of a face do not overlap, so the sums stay within [0, 1] up to rounding;
-        // a texel touched only along an edge or a corner (area below 1e-6) holds nothing.
-        for (std::size_t tx = 0; tx < area.size(); ++tx)
-            v.mCoverage[m.firstTexel + tx] = area[tx] < 1e-6 ? 0.f : float(std::min(area[tx], 1.0));
-    }
 
     // Tiles: a specular face gets tile (s, t) of subfield i when its projection comes within
-    // one cell of the tile, so every bilinear neighbour of a point on the face exists.
+    // one cell of the tile, so every bilinear neighbour of a point on the face exists. First
+    // the blocks (the projection's bounding rectangle of tiles)...
     v.mSpecularIndex.assign(v.mFaces.size(), -1);
     for (std::size_t fi = 0; fi < v.mFaces.size(); ++fi)
         if (v.mFaces[fi].isSpecular()) {
@@ -217,6 +193,13 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
     const int N = settings.linesPerSide, m = settings.tileSize, n = N / m;
     const float h = v.cellWidth();
     v.mBlocks.assign(v.mSpecularFaces.size() * l, TileBlock{});
+    std::size_t slots = 0;
+    const auto projected = [&](std::size_t i, std::uint32_t ti) {
+        const VlfScene::Triangle& t = scene.triangles()[ti];
+        return std::array<glm::vec2, 3>{(v.project(i, t.p0) + 1.f) / h,
+                                        (v.project(i, t.p1) + 1.f) / h,
+                                        (v.project(i, t.p2) + 1.f) / h};
+    };
     for (std::size_t sf = 0; sf < v.mSpecularFaces.size(); ++sf) {
         const Face& f = scene.faces()[v.mSpecularFaces[sf]];
         for (std::size_t i = 0; i < l; ++i) {
@@ -224,20 +207,12 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
             const float c = glm::dot(f.normal, v.mDirections->direction(i));
             if (std::abs(c) < 1e-4f) continue;
             // Projected triangles in cell units.
-            std::vector<std::array<glm::vec2, 3>> tris;
             glm::vec2 lo(1e30f), hi(-1e30f);
-            for (std::uint32_t ti : f.triangles) {
-                const VlfScene::Triangle& t = scene.triangles()[ti];
-                std::array<glm::vec2, 3> q;
-                int k = 0;
-                for (const glm::vec3& p : {t.p0, t.p1, t.p2}) {
-                    q[k] = (v.project(i, p) + 1.f) / h;
-                    lo = glm::min(lo, q[k]);
-                    hi = glm::max(hi, q[k]);
-                    ++k;
+            for (std::uint32_t ti : f.triangles)
+                for (const glm::vec2& q : projected(i, ti)) {
+                    lo = glm::min(lo, q);
+                    hi = glm::max(hi, q);
                 }
-                tris.push_back(q);
-            }
             const int s0 = std::clamp(int(std::floor(lo.x - 1.f)) / m, 0, n - 1);
             const int s1 = std::clamp(int(std::floor(hi.x + 1.f)) / m, 0, n - 1);
             const int t0 = std::clamp(int(std::floor(lo.y - 1.f)) / m, 0, n - 1);
@@ -247,26 +222,100 @@ Vlf Vlf::allocate(const VlfScene& scene, const VlfSettings& settings) {
             block.t0 = t0;
             block.sw = s1 - s0 + 1;
             block.tw = t1 - t0 + 1;
-            block.firstSlot = std::uint32_t(v.mSlots.size());
-            v.mSlots.resize(v.mSlots.size() + std::size_t(block.sw) * block.tw, -1);
-            for (int t = t0; t <= t1; ++t)
-                for (int s = s0; s <= s1; ++s) {
-                    const glm::vec2 boxLo(float(s * m) - 1.f, float(t * m) - 1.f);
-                    const glm::vec2 boxHi(float((s + 1) * m) + 1.f, float((t + 1) * m) + 1.f);
-                    bool hit = false;
-                    for (const auto& q : tris)
-                        if (overlaps(q, boxLo, boxHi)) {
-                            hit = true;
-                            break;
-                        }
-                    if (hit)
-                        v.mSlots[block.firstSlot + std::size_t(t - t0) * block.sw + (s - s0)] =
-                            std::int32_t(v.mTileCount++);
-                }
+            block.firstSlot = std::uint32_t(slots);
+            slots += std::size_t(block.sw) * block.tw;
         }
     }
-    const VlfMemory need = v.memory();
-    if (limit > 0.0 && double(need.bakeBytes) > limit) tooBig(double(need.bakeBytes));
+    // ...the slots with no tile yet (their share of the memory is known now)...
+    checkMemory(vlfMemory(l, 0, m, texels, slots, v.mBlocks.size(), v.mFaces.size()));
+    if (slots > std::numeric_limits<std::uint32_t>::max())
+        fail(baking, "needs ", slots,
+             " tile slots, more than 2^32: lower the direction level or the lines per side");
+    v.mSlots.assign(slots, -1);
+    // ...then the tiles each triangle touches, testing only those near its own bounds (not
+    // every tile of the block against every triangle: a face split into thousands of
+    // triangles would take minutes), numbered row by row within each block.
+    constexpr std::int32_t kHit = -2;
+    for (std::size_t sf = 0; sf < v.mSpecularFaces.size(); ++sf) {
+        const Face& f = scene.faces()[v.mSpecularFaces[sf]];
+        for (std::size_t i = 0; i < l; ++i) {
+            TileBlock& block = v.mBlocks[sf * l + i];
+            if (block.side == 0) continue;
+            for (std::uint32_t ti : f.triangles) {
+                const std::array<glm::vec2, 3> q = projected(i, ti);
+                const glm::vec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
+                const glm::vec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
+                // One tile more on each side than the bounds reach: overlaps() decides.
+                const float fm = float(m);
+                const int sa = std::max(block.s0, floorIndex((lo.x - 1.f) / fm) - 1);
+                const int sb = std::min(block.s0 + block.sw - 1, floorIndex((hi.x + 1.f) / fm) + 1);
+                const int ta = std::max(block.t0, floorIndex((lo.y - 1.f) / fm) - 1);
+                const int tb = std::min(block.t0 + block.tw - 1, floorIndex((hi.y + 1.f) / fm) + 1);
+                for (int t = ta; t <= tb; ++t)
+                    for (int s = sa; s <= sb; ++s) {
+                        std::int32_t& slot =
+                            v.mSlots[block.firstSlot + std::size_t(t - block.t0) * block.sw +
+                                     std::size_t(s - block.s0)];
+                        if (slot == kHit) continue;
+                        const glm::vec2 boxLo(float(s * m) - 1.f, float(t * m) - 1.f);
+                        const glm::vec2 boxHi(float((s + 1) * m) + 1.f, float((t + 1) * m) + 1.f);
+                        if (overlaps(q, boxLo, boxHi)) slot = kHit;
+                    }
+            }
+            const std::size_t count = std::size_t(block.sw) * block.tw;
+            for (std::size_t k = 0; k < count; ++k)
+                if (v.mSlots[block.firstSlot + k] == kHit)
+                    v.mSlots[block.firstSlot + k] = std::int32_t(v.mTileCount++);
+        }
+    }
+
+    // Every count is known: the whole bake's memory, and the atlas the renderer will upload.
+    checkMemory(vlfMemory(l, v.mTileCount, m, texels, slots, v.mBlocks.size(), v.mFaces.size()));
+    if (settings.maxAtlasSize > 0) {
+        const shader::VlfAtlasSize atlas = shader::vlfAtlasSize(v.mTileCount, m);
+        if (atlas.width > settings.maxAtlasSize || atlas.height > settings.maxAtlasSize) {
+            const std::string detail =
+                str("needs a tile atlas of ", atlas.width, "x", atlas.height, " texels for its ",
+                    v.mTileCount, " tiles, over the GL limit ", settings.maxAtlasSize);
+            throw VlfTooLarge(VlfTooLarge::Limit::Atlas, detail,
+                              str(baking, detail,
+                                  " (VlfSettings.maxAtlasSize): lower the direction level or the "
+                                  "lines per side"));
+        }
+    }
+
+    // Irradiance maps with the exact fraction of each texel inside the face: every triangle,
+    // in texel units, clipped against the texels its bounds touch.
+    v.mCoverage.assign(texels, 0.f);
+    v.mIrradiance.assign(texels, glm::vec3(0.f));
+    for (std::size_t fi = 0; fi < scene.faces().size(); ++fi) {
+        const Face& f = scene.faces()[fi];
+        const FaceMap& fm = v.mFaceMaps[fi];
+        std::vector<double> area(std::size_t(fm.width) * fm.height, 0.0);
+        for (std::uint32_t ti : f.triangles) {
+            const VlfScene::Triangle& t = scene.triangles()[ti];
+            std::array<glm::dvec2, 3> q;
+            int k = 0;
+            for (const glm::vec3& p : {t.p0, t.p1, t.p2})
+                q[k++] = glm::dvec2(double(glm::dot(p - f.origin, f.axisU)) / fm.texelU,
+                                    double(glm::dot(p - f.origin, f.axisV)) / fm.texelV);
+            const glm::dvec2 lo = glm::min(q[0], glm::min(q[1], q[2]));
+            const glm::dvec2 hi = glm::max(q[0], glm::max(q[1], q[2]));
+            const int x0 = std::max(0, int(std::floor(lo.x))),
+                      x1 = std::min(int(fm.width) - 1, int(std::floor(hi.x)));
+            const int y0 = std::max(0, int(std::floor(lo.y))),
+                      y1 = std::min(int(fm.height) - 1, int(std::floor(hi.y)));
+            for (int y = y0; y <= y1; ++y)
+                for (int x = x0; x <= x1; ++x)
+                    area[std::size_t(y) * fm.width + x] +=
+                        clippedArea(q, glm::dvec2(x, y), glm::dvec2(x + 1, y + 1));
+        }
+        // Triangles of a face do not overlap, so the sums stay within [0, 1] up to rounding;
+        // a texel touched only along an edge or a corner (area below 1e-6) holds nothing.
+        for (std::size_t tx = 0; tx < area.size(); ++tx)
+            v.mCoverage[fm.firstTexel + tx] =
+                area[tx] < 1e-6 ? 0.f : float(std::min(area[tx], 1.0));
+    }
     v.mCells.assign(v.mTileCount * std::size_t(m) * m, glm::u16vec4(0));
     return v;
 }
@@ -319,16 +368,16 @@ std::int64_t Vlf::cellIndex(std::size_t sf, std::size_t psf, int i, int j) const
     return std::int64_t(cellOffset(tile, i, j, mSettings.tileSize));
 }
 
-VlfMemory Vlf::memory() const {
+VlfMemory vlfMemory(std::size_t directions, std::size_t tiles, int tileSize, std::size_t texels,
+                    std::size_t slots, std::size_t blocks, std::size_t faces) {
     VlfMemory mem;
-    const int m = mSettings.tileSize;
-    mem.directions = mDirections ? mDirections->size() : 0;
-    mem.tiles = mTileCount;
-    mem.tileCells = mTileCount * std::size_t(m) * m;
-    mem.diffuseTexels = mIrradiance.size();
-    const std::size_t index = mSlots.size() * sizeof(std::int32_t) +
-                              mBlocks.size() * sizeof(TileBlock) +
-                              mFaceMaps.size() * sizeof(FaceMap) + mCoverage.size() * sizeof(float);
+    mem.directions = directions;
+    mem.tiles = tiles;
+    mem.tileCells = tiles * std::size_t(tileSize) * std::size_t(tileSize);
+    mem.diffuseTexels = texels;
+    // Coverage: one float per texel.
+    const std::size_t index = slots * sizeof(std::int32_t) + blocks * sizeof(TileBlock) +
+                              faces * sizeof(FaceMap) + texels * sizeof(float);
     mem.renderBytes =
         mem.tileCells * sizeof(glm::u16vec4) + mem.diffuseTexels * sizeof(glm::vec3) + index;
     // The bake adds, per cell: the float cells it packs at the end (RGBA), unshot, next and
@@ -340,6 +389,11 @@ VlfMemory Vlf::memory() const {
         mem.tileCells * (2 * sizeof(glm::vec4) + 3 * sizeof(glm::vec3) + sizeof(float)) +
         mem.diffuseTexels * (2 + chunks) * sizeof(glm::vec3);
     return mem;
+}
+
+VlfMemory Vlf::memory() const {
+    return vlfMemory(mDirections ? mDirections->size() : 0, mTileCount, mSettings.tileSize,
+                     mIrradiance.size(), mSlots.size(), mBlocks.size(), mFaceMaps.size());
 }
 
 glm::vec3 Vlf::sampleTexels(const std::vector<glm::vec3>& texels, std::uint32_t face,

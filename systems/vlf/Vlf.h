@@ -4,6 +4,8 @@
 #include "systems/vlf/VlfScene.h"
 #include "systems/vlf/VlfSettings.h"
 
+#include "runtime/core/Error.h"
+
 #include <glm/gtc/type_precision.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
@@ -88,6 +90,28 @@ struct VlfMemory {
     std::size_t diffuseTexels = 0; ///< irradiance-map texels over all faces
     std::size_t renderBytes = 0;   ///< what lookups keep: packed cells, RGB float texels, index
     std::size_t bakeBytes = 0;     ///< peak during the bake: the bake's extra copies on top
+};
+
+/// The memory of a layout with these counts: `tiles` tiles of tileSize^2 cells, `texels`
+/// irradiance-map texels, `slots` tile slots in `blocks` blocks, `faces` face maps. What
+/// Vlf::memory() reports and what Vlf::allocate checks before its large arrays, from one
+/// formula.
+VlfMemory vlfMemory(std::size_t directions, std::size_t tiles, int tileSize, std::size_t texels,
+                    std::size_t slots, std::size_t blocks, std::size_t faces);
+
+/** Thrown by Vlf::allocate (and so by bakeVlf) when the layout is beyond a limit of its
+ *  settings: the bake's memory (VlfSettings::maxBakeBytes) or the renderer's tile atlas
+ *  (VlfSettings::maxAtlasSize). Found before the bake and before any array of the tiles or
+ *  texels is allocated. what() names the library's settings; `detail` is the figure alone
+ *  ("needs about 41.2 GB, over the 12.6 GB allowed"), for a front end that words the advice
+ *  with its own options.                                                                  */
+class VlfTooLarge : public Error {
+public:
+    enum class Limit { Memory, Atlas };
+    VlfTooLarge(Limit which, std::string figure, const std::string& message)
+        : Error(message), limit(which), detail(std::move(figure)) {}
+    Limit limit;
+    std::string detail;
 };
 
 /** A baked Virtual Light Field (seed 002): the direction set, the subfield grids, per-face

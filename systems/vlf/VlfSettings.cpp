@@ -29,6 +29,8 @@ void validate(const VlfSettings& s) {
         fail("VlfSettings.filterSigma = ", s.filterSigma, " is out of range (0..8)");
     if (!std::isfinite(s.glossyCutoff) || s.glossyCutoff < 0.f || s.glossyCutoff >= 1.f)
         fail("VlfSettings.glossyCutoff = ", s.glossyCutoff, " is out of range [0, 1)");
+    if (s.maxAtlasSize < 0)
+        fail("VlfSettings.maxAtlasSize = ", s.maxAtlasSize, " is negative (0: not checked)");
 }
 
 } // namespace qgi

@@ -29,6 +29,11 @@ struct VlfSettings {
     /// container's memory limit is not read: set this below it). Settings within their ranges
     /// can ask for tens of GB (direction level 6 at 256 lines).
     std::uint64_t maxBakeBytes = 0;
+    /// Largest texture side, texels, of the renderer that will draw the field (its
+    /// GL_MAX_TEXTURE_SIZE): a layout whose tile atlas (shader::vlfAtlasSize) is larger fails
+    /// before the bake, not after it at upload. 0: not checked (a field for no renderer);
+    /// FrameSchedule sets it from the current GL context when it renders.
+    int maxAtlasSize = 0;
 };
 
 /// Throws qgi::Error naming the field when a setting is out of range or not finite.

@@ -737,6 +737,23 @@ TEST(DemoSmoke, ThePointCacheIsBakedOnceThenLoadedAndShadesTheTaggedFloor) {
     EXPECT_FALSE(first.rgba == points.rgba);
 }
 
+TEST(DemoSmoke, AVlfTooLargeForTheMachineOrTheGpuIsRefusedBeforeItsBakeInTheDemosOptions) {
+    // Level 4 at 1024 lines on the glossy Cornell box: millions of tiles, an atlas beyond
+    // any GL limit and tens of GB. Refused from the layout, before a bake of many minutes,
+    // in the options the user typed.
+    const RunResult run = runDemo("--scene cornell-glossy --headless --frames 1 --photons 0 "
+                                  "--quiet --vlf on --vlf-cache none --vlf-level 4 "
+                                  "--vlf-lines 1024");
+    EXPECT_EQ(run.exitCode, 1) << run.output;
+    EXPECT_TRUE(run.output.starts_with("qgi-demo: error: --vlf-level 4 --vlf-lines 1024: the VLF "
+                                       "of this scene needs "))
+        << run.output;
+    EXPECT_NE(run.output.find("; lower --vlf-level or --vlf-lines"), std::string::npos)
+        << run.output;
+    EXPECT_EQ(run.output.find("VlfSettings"), std::string::npos) << run.output;
+    EXPECT_EQ(std::count(run.output.begin(), run.output.end(), '\n'), 1) << run.output;
+}
+
 TEST(DemoSmoke, TheVlfIsBakedCachedAndDrawsTheGlossyCornellBox) {
     const fs::path dir = scratchDir() / "vlf";
     fs::remove_all(dir);

@@ -2,8 +2,10 @@
 #include "components/Material.h"
 #include "runtime/core/Error.h"
 #include "runtime/render/RenderScene.h"
+#include "runtime/render/ShaderInterface.h"
 #include "systems/vlf/DirectionSet.h"
 #include "systems/vlf/Vlf.h"
+#include "systems/vlf/VlfBake.h"
 #include "test_vlf_scenes.h"
 
 #include <glm/gtc/constants.hpp>
@@ -235,6 +237,29 @@ VlfSettings tiledSettings() {
     return s;
 }
 
+/// A 2 m mirror floor in 20 x 20 quads: one face of 800 triangles, as the demo's mesh
+/// refinement makes of a one-quad floor.
+std::unique_ptr<VlfScene> dividedMirrorFloor() {
+    test::VlfSceneBuilder b;
+    const std::uint32_t mirror = b.material(glm::vec3(0.f), glm::vec3(0.f), glm::vec3(1.f), 0.f);
+    constexpr int kSide = 20;
+    const auto at = [](int i) { return -1.f + 2.f * float(i) / float(kSide); };
+    for (int z = 0; z < kSide; ++z)
+        for (int x = 0; x < kSide; ++x)
+            b.quad({at(x), 0.f, at(z)}, {at(x), 0.f, at(z + 1)}, {at(x + 1), 0.f, at(z + 1)},
+                   {at(x + 1), 0.f, at(z)}, mirror);
+    return b.build();
+}
+
+/// qgi-demo's --vlf-level 4 --vlf-lines 1024: about 2 million tiles on that floor.
+VlfSettings absurdSettings() {
+    VlfSettings s;
+    s.directionLevel = 4;
+    s.linesPerSide = 1024;
+    s.maxBakeBytes = std::uint64_t(1) << 50; // no memory limit here
+    return s;
+}
+
 } // namespace
 
 TEST(VlfTiling, ABakeThatWouldNeedMoreMemoryThanAllowedFailsBeforeAllocating) {
@@ -252,6 +277,75 @@ TEST(VlfTiling, ABakeThatWouldNeedMoreMemoryThanAllowedFailsBeforeAllocating) {
                   std::string::npos)
             << e.what();
     }
+}
+
+TEST(VlfTiling, ATileAtlasBeyondTheGlLimitIsRefusedBeforeTheBake) {
+    // The layout alone fixes the atlas: the bake (minutes at these settings) never starts,
+    // and neither do the layout's own large arrays.
+    const auto scene = dividedMirrorFloor();
+    ASSERT_EQ(scene->faces().size(), 1u);
+    VlfSettings s = absurdSettings();
+    s.maxAtlasSize = 16384; // GL 4.5's guaranteed minimum, llvmpipe's limit
+    try {
+        bakeVlf(*scene, s);
+        ADD_FAILURE() << "no error";
+    } catch (const VlfTooLarge& e) {
+        const std::string message = e.what();
+        EXPECT_EQ(e.limit, VlfTooLarge::Limit::Atlas);
+        EXPECT_NE(e.detail.find("over the GL limit 16384"), std::string::npos) << e.detail;
+        EXPECT_NE(message.find(e.detail), std::string::npos) << message;
+        EXPECT_NE(message.find("(VlfSettings.maxAtlasSize): lower the direction level"),
+                  std::string::npos)
+            << message;
+    }
+}
+
+TEST(VlfTiling, ABakeBeyondTheMemoryLimitIsRefusedBeforeTheBake) {
+    const auto scene = dividedMirrorFloor();
+    VlfSettings s = absurdSettings();
+    s.maxBakeBytes = std::uint64_t(1) << 30; // the bake needs about 11 GB
+    try {
+        bakeVlf(*scene, s);
+        ADD_FAILURE() << "no error";
+    } catch (const VlfTooLarge& e) {
+        EXPECT_EQ(e.limit, VlfTooLarge::Limit::Memory);
+        EXPECT_NE(e.detail.find("GB, over the 1.07374 GB allowed"), std::string::npos) << e.detail;
+        EXPECT_NE(std::string(e.what()).find("VlfSettings.maxBakeBytes"), std::string::npos)
+            << e.what();
+    }
+}
+
+TEST(VlfTiling, AnAtlasExactlyAtTheGlLimitIsAcceptedAndOneTexelLessIsNot) {
+    const auto scene = glossyRoom();
+    VlfSettings s = tiledSettings();
+    const Vlf v = Vlf::allocate(*scene, s);
+    // The atlas the renderer will lay out (SceneRenderer::uploadVlf), from the same function.
+    const shader::VlfAtlasSize atlas = shader::vlfAtlasSize(v.tileCount(), s.tileSize);
+    EXPECT_EQ(atlas.width, shader::kVlfAtlasTiles * s.tileSize);
+    EXPECT_EQ(atlas.height,
+              std::int64_t((v.tileCount() + shader::kVlfAtlasTiles - 1) / shader::kVlfAtlasTiles) *
+                  s.tileSize);
+    s.maxAtlasSize = int(std::max(atlas.width, atlas.height));
+    EXPECT_NO_THROW(Vlf::allocate(*scene, s));
+    s.maxAtlasSize -= 1;
+    EXPECT_THROW(Vlf::allocate(*scene, s), VlfTooLarge);
+    s.maxAtlasSize = 0; // not checked
+    EXPECT_NO_THROW(Vlf::allocate(*scene, s));
+}
+
+TEST(VlfTiling, TheMemoryCheckedBeforeAllocatingIsWhatTheFieldReports) {
+    // vlfMemory from the counts is Vlf::memory(): the check before the arrays and the figure
+    // after them cannot disagree.
+    const auto scene = glossyRoom();
+    const Vlf v = Vlf::allocate(*scene, tiledSettings());
+    const VlfMemory a = v.memory();
+    const VlfMemory b =
+        vlfMemory(v.directions().size(), v.tileCount(), v.tileSize(), v.irradiance().size(),
+                  v.slots().size(), v.blocks().size(), v.faceMaps().size());
+    EXPECT_EQ(a.bakeBytes, b.bakeBytes);
+    EXPECT_EQ(a.renderBytes, b.renderBytes);
+    EXPECT_EQ(a.tileCells, v.cellCount());
+    EXPECT_EQ(a.diffuseTexels, v.texelCoverage().size());
 }
 
 TEST(VlfTiling, TilesCoverTheProjectionAndNoMore) {
