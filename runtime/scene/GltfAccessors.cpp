@@ -133,7 +133,8 @@ void GltfReader::checkAccessors() const {
 }
 
 AccessorData GltfReader::useAccessor(const std::string& usage, int index, int type,
-                                     std::initializer_list<int> componentTypes) const {
+                                     std::initializer_list<int> componentTypes,
+                                     std::size_t decodedElement) const {
     checkIndex(usage, index, mModel.accessors.size(), "accessors");
     const tinygltf::Accessor& a = mModel.accessors[std::size_t(index)];
     const std::string field = str("accessors[", index, "]");
@@ -144,7 +145,20 @@ AccessorData GltfReader::useAccessor(const std::string& usage, int index, int ty
         fail(field + ".componentType", componentName(a.componentType), " is not allowed for ",
              usage);
     const std::size_t element = elementBytes(a.componentType, a.type);
-    if (!a.sparse.isSparse && a.bufferView >= 0) {
+    const bool copied = a.sparse.isSparse || a.bufferView < 0;
+    if (copied && a.count > kGltfMaxFileBytes / element)
+        fail(field + ".count", a.count, " elements of ", element,
+             " bytes would take more than a file may hold (", kGltfMaxFileBytes, " bytes)");
+    // What the whole file decodes is bounded too: one accessor within the limit above, or
+    // read by many meshes, or many of them, could still ask for more than memory holds.
+    const std::uintmax_t decoded =
+        std::uintmax_t(a.count) * ((copied ? element : 0) + decodedElement);
+    if (decoded > kGltfMaxDecodedBytes - mDecodedBytes)
+        fail(field + ".count", a.count, " elements read as ", usage, " decode to ", decoded,
+             " bytes, which would bring the file's decoded accessors to ", mDecodedBytes + decoded,
+             " bytes, over the limit of ", kGltfMaxDecodedBytes);
+    mDecodedBytes += decoded;
+    if (!copied) {
         const tinygltf::BufferView& view = mModel.bufferViews[std::size_t(a.bufferView)];
         return {mModel.buffers[std::size_t(view.buffer)].data.data() + view.byteOffset +
                     a.byteOffset,
@@ -152,9 +166,6 @@ AccessorData GltfReader::useAccessor(const std::string& usage, int index, int ty
     }
     // Without a buffer view the elements are zeros; a sparse accessor then replaces some of
     // them (glTF 2.0 section 3.6.2.3). Both are laid out tightly in memory kept for the read.
-    if (a.count > kGltfMaxFileBytes / element)
-        fail(field + ".count", a.count, " elements of ", element,
-             " bytes would take more than a file may hold (", kGltfMaxFileBytes, " bytes)");
     std::vector<unsigned char>& dense = mDenseAccessors.emplace_back(a.count * element, 0);
     if (a.bufferView >= 0) {
         const AccessorData base = rawView(index, element);
@@ -218,8 +229,8 @@ void GltfReader::applySparse(int index, std::size_t element,
 }
 
 std::vector<glm::vec3> GltfReader::readVec3(const std::string& usage, int index) const {
-    const AccessorData a =
-        useAccessor(usage, index, TINYGLTF_TYPE_VEC3, {TINYGLTF_COMPONENT_TYPE_FLOAT});
+    const AccessorData a = useAccessor(usage, index, TINYGLTF_TYPE_VEC3,
+                                       {TINYGLTF_COMPONENT_TYPE_FLOAT}, sizeof(glm::vec3));
     std::vector<glm::vec3> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         const unsigned char* p = a.data + i * a.stride;
@@ -233,7 +244,8 @@ std::vector<glm::vec2> GltfReader::readTexcoords(const std::string& usage, int i
     const AccessorData a =
         useAccessor(usage, index, TINYGLTF_TYPE_VEC2,
                     {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE,
-                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT});
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT},
+                    sizeof(glm::vec2));
     if (a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT &&
         !mModel.accessors[std::size_t(index)].normalized)
         fail(str("accessors[", index, "].normalized"), usage, " stored as ",
@@ -263,7 +275,8 @@ std::vector<std::uint32_t> GltfReader::readIndices(const std::string& usage, int
     const AccessorData a =
         useAccessor(usage, index, TINYGLTF_TYPE_SCALAR,
                     {TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT,
-                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT});
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT},
+                    sizeof(std::uint32_t));
     std::vector<std::uint32_t> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         const unsigned char* p = a.data + i * a.stride;
@@ -285,8 +298,8 @@ std::vector<std::uint32_t> GltfReader::readIndices(const std::string& usage, int
 }
 
 std::vector<float> GltfReader::readScalars(const std::string& usage, int index) const {
-    const AccessorData a =
-        useAccessor(usage, index, TINYGLTF_TYPE_SCALAR, {TINYGLTF_COMPONENT_TYPE_FLOAT});
+    const AccessorData a = useAccessor(usage, index, TINYGLTF_TYPE_SCALAR,
+                                       {TINYGLTF_COMPONENT_TYPE_FLOAT}, sizeof(float));
     std::vector<float> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         out[i] = load<float>(a.data + i * a.stride);
@@ -302,7 +315,8 @@ std::vector<glm::vec4> GltfReader::readRotations(const std::string& usage, int i
         useAccessor(usage, index, TINYGLTF_TYPE_VEC4,
                     {TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_COMPONENT_TYPE_BYTE,
                      TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE, TINYGLTF_COMPONENT_TYPE_SHORT,
-                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT});
+                     TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT},
+                    sizeof(glm::vec4));
     std::vector<glm::vec4> out(a.count);
     for (std::size_t i = 0; i < a.count; ++i) {
         const unsigned char* p = a.data + i * a.stride;

@@ -145,6 +145,24 @@ std::vector<RawPrimitive> GltfReader::readMesh(int meshIndex) const {
         if (attribute("COLOR_0") >= 0)
             logWarning(mLabel, ": ", attributes,
                        "COLOR_0: vertex colours are not imported (baseColorFactor is the albedo)");
+        // The triangles the primitive declares follow from the accessors' counts: a file whose
+        // primitives declare more than a scene may hold is refused before any is decoded (an
+        // accessor of zeros with no buffer view costs the file nothing).
+        checkIndex(attributes + "POSITION", position, mModel.accessors.size(), "accessors");
+        if (primitive.indices >= 0)
+            checkIndex(raw.field + ".indices", primitive.indices, mModel.accessors.size(),
+                       "accessors");
+        const int orderAccessor = primitive.indices >= 0 ? primitive.indices : position;
+        const std::size_t corners = mModel.accessors[std::size_t(orderAccessor)].count;
+        const std::uintmax_t declared = mode == TINYGLTF_MODE_TRIANGLES ? corners / 3
+                                        : corners > 2                   ? corners - 2
+                                                                        : 0;
+        if (double(mDeclaredTriangles + declared) > kSceneMaxTriangles)
+            fail(raw.field, "accessors[", orderAccessor, "].count ", corners, " makes ", declared,
+                 " triangles, which would bring the file's primitives to ",
+                 mDeclaredTriangles + declared, " triangles, more than the limit of ",
+                 kSceneMaxTriangles);
+        mDeclaredTriangles += declared;
         raw.mesh.positions = readVec3(attributes + "POSITION", position);
         const std::size_t count = raw.mesh.positions.size();
         const auto checkCount = [&](const std::string& field, std::size_t n) {

@@ -43,7 +43,9 @@
  *  parsing it checks what tinygltf does not: every index, every byte range of buffer views and
  *  accessors, component types per attribute, index values, finite numbers and their ranges
  *  (colours in [0, 1], lights and emission up to kMaxRadiometricValue, usable cameras), the
- *  node graph (one parent per node, no cycles, bounded depth), the total triangle count after
+ *  node graph (one parent per node, no cycles, bounded depth), the bytes decoded from all
+ *  accessors together (kGltfMaxDecodedBytes) and the triangles the primitives declare
+ *  (kSceneMaxTriangles), both before decoding, the total triangle count after
  *  refinement with every instance counted (kSceneMaxTriangles) and the float precision left at
  *  the scene's distance from the origin. Any failure throws
  *  qgi::Error with one line `<file>: <field path>: <what>`, and the registry is left as it was:
@@ -72,6 +74,12 @@ inline constexpr double kMaxRadiometricValue = 1e9;
 inline constexpr double kSceneMaxSize = 1e6;
 /// Largest .gltf, .glb, external buffer or image file the importer reads, bytes.
 inline constexpr std::uintmax_t kGltfMaxFileBytes = std::uintmax_t(1) << 30;
+/// Most bytes the importer decodes from one file's accessors, all together: the dense copies
+/// of sparse accessors and of accessors without a buffer view (zeros), and the vertices,
+/// indices and keys read from them (an accessor read by two meshes counts twice). A few lines
+/// of JSON can declare a hundred million zeros; this bounds what they cost before anything is
+/// allocated. A level of a few million triangles decodes to a few hundred MB.
+inline constexpr std::uintmax_t kGltfMaxDecodedBytes = std::uintmax_t(3) << 29; // 1.5 GiB
 /// Deepest node hierarchy accepted: the transform system walks at most 256 ancestors, and mesh
 /// primitives may add one level below their node.
 inline constexpr int kGltfMaxNodeDepth = 128;

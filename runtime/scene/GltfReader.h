@@ -182,9 +182,12 @@ private:
     void checkBufferViews() const;
     void checkAccessors() const;
     /// A range-checked accessor used as `usage` (a field path), of the given type and one of
-    /// the given component types.
+    /// the given component types, that the caller decodes into `decodedElement` bytes an
+    /// element: counted against kGltfMaxDecodedBytes (with any dense copy made here) before
+    /// anything is allocated.
     AccessorData useAccessor(const std::string& usage, int index, int type,
-                             std::initializer_list<int> componentTypes) const;
+                             std::initializer_list<int> componentTypes,
+                             std::size_t decodedElement) const;
     /// Accessor `index`'s own buffer view, as stored.
     AccessorData rawView(int index, std::size_t element) const;
     /// Writes a sparse accessor's substitutions over its dense elements.
@@ -248,6 +251,10 @@ private:
     std::vector<int> mNodeRecord; ///< per node, its record (traverse); -1: not in the scene
     /// Sparse accessors and accessors without a buffer view, laid out densely while read.
     mutable std::deque<std::vector<unsigned char>> mDenseAccessors;
+    /// Bytes decoded from accessors so far (kGltfMaxDecodedBytes).
+    mutable std::uintmax_t mDecodedBytes = 0;
+    /// Triangles the primitives read so far declare, before processing (kSceneMaxTriangles).
+    mutable std::uintmax_t mDeclaredTriangles = 0;
 };
 
 } // namespace qgi::gltf_detail

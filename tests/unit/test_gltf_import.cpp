@@ -24,6 +24,7 @@
 #include <glm/gtc/constants.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <stb/stb_image_write.h>
@@ -39,6 +40,7 @@ namespace qgi {
 namespace {
 
 namespace fs = std::filesystem;
+using ::testing::HasSubstr;
 
 const fs::path kGood = fs::path(QGI_TEST_DATA_DIR) / "gltf" / "good";
 // An edge bound far above every file's size: meshes keep exactly the file's vertices.
@@ -553,6 +555,79 @@ TEST(GltfImport, SparseAccessorsAndAccessorsWithoutDataAreRead) {
     for (const glm::vec2& uv : mesh.uvs)
         EXPECT_EQ(uv, glm::vec2(0.f));
     fs::remove(path);
+}
+
+/// An accessor of `count` zero positions: no buffer view (a few bytes of JSON that glTF lets
+/// stand for any number of zeros).
+int zeroPositions(GltfWriter& w, std::size_t count) {
+    w.doc["accessors"].push_back({{"componentType", 5126},
+                                  {"count", count},
+                                  {"type", "VEC3"},
+                                  {"min", {0, 0, 0}},
+                                  {"max", {0, 0, 0}}});
+    return int(w.doc["accessors"].size() - 1);
+}
+
+/// Imports `w` and returns the error's message ("" when it loads), checking that a failed
+/// import left the registry empty.
+std::string importError(GltfWriter& w, const char* name) {
+    const fs::path path = fs::path(::testing::TempDir()) / name;
+    w.write(path);
+    Registry registry;
+    std::string message;
+    try {
+        importGltf(registry, path, kNoRefinement);
+    } catch (const Error& e) {
+        message = e.what();
+        EXPECT_EQ(registry.aliveCount(), 0u);
+    }
+    fs::remove(path);
+    return message;
+}
+
+TEST(GltfImport, ZeroPositionsDeclaringMoreTrianglesThanASceneHoldsAreRefusedBeforeDecoding) {
+    // 3 * kSceneMaxTriangles + 3 zeros as a triangle list: one triangle over the limit, in
+    // a few hundred bytes of JSON that would decode to 1.4 GB.
+    GltfWriter w;
+    const float unused[3] = {};
+    w.view(unused, sizeof unused); // the file's buffer may not be empty
+    const std::size_t count = 3 * std::size_t(kSceneMaxTriangles) + 3;
+    const int zeros = zeroPositions(w, count);
+    w.doc["meshes"] = {{{"primitives", {{{"attributes", {{"POSITION", zeros}}}}}}}};
+    w.doc["nodes"] = {{{"mesh", 0}}};
+    w.doc["scenes"] = {{{"nodes", {0}}}};
+    const std::string message = importError(w, "zero_triangles.gltf");
+    EXPECT_THAT(message, HasSubstr("zero_triangles.gltf: meshes[0].primitives[0]: "
+                                   "accessors[0].count " +
+                                   std::to_string(count)));
+    EXPECT_THAT(message, HasSubstr("20000001 triangles, more than the limit of 2e+07"));
+}
+
+TEST(GltfImport, AccessorsDecodingToMoreThanTheFileLimitTogetherAreRefusedBeforeTheLastOne) {
+    // A real triangle (36 bytes decoded), then a second primitive with one triangle over
+    // zero positions that alone decode to exactly kGltfMaxDecodedBytes (12 bytes of zeros
+    // and 12 of positions each): together 36 bytes over the limit.
+    GltfWriter w;
+    const int triangle = w.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+    const std::size_t count = std::size_t(kGltfMaxDecodedBytes / 24);
+    ASSERT_EQ(count * 24, kGltfMaxDecodedBytes);
+    ASSERT_LE(count * 12, kGltfMaxFileBytes); // within the limit on one accessor
+    const int zeros = zeroPositions(w, count);
+    const std::vector<std::uint16_t> corners{0, 1, 2};
+    const int cornerView = w.view(corners.data(), 6);
+    w.doc["accessors"].push_back(
+        {{"bufferView", cornerView}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}});
+    w.doc["meshes"] = {{{"primitives",
+                         {{{"attributes", {{"POSITION", triangle}}}},
+                          {{"attributes", {{"POSITION", zeros}}}, {"indices", 2}}}}}};
+    w.doc["nodes"] = {{{"mesh", 0}}};
+    w.doc["scenes"] = {{{"nodes", {0}}}};
+    const std::string message = importError(w, "zero_bytes.gltf");
+    EXPECT_THAT(message,
+                HasSubstr("zero_bytes.gltf: accessors[1].count: " + std::to_string(count) +
+                          " elements read as meshes[0].primitives[1].attributes.POSITION"));
+    EXPECT_THAT(message, HasSubstr(str("to ", kGltfMaxDecodedBytes + 36,
+                                       " bytes, over the limit of ", kGltfMaxDecodedBytes)));
 }
 
 TEST(GltfImport, AnImageNoMaterialDrawsMayBeUndecodable) {
