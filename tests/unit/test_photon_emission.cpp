@@ -399,13 +399,19 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
     expectDark(bad);
     // Past kMaxPoseReach from the origin (Embree aborts on rays from 1.8e18 m): dark. Just
     // inside it, a light still shines.
+    // A light of `kind` shining with radiant 1 (a spot's cones 0.2 and 0.4 rad) from `world`.
+    const auto shining = [](EmitterKind kind, const glm::mat4& world) {
+        PhotonEmitter light;
+        light.kind = kind;
+        light.radiant = glm::vec3(1.f);
+        light.innerAngle = 0.2f;
+        light.outerAngle = 0.4f;
+        light.world = world;
+        return light;
+    };
     for (const EmitterKind kind : {EmitterKind::Point, EmitterKind::Spot}) {
-        PhotonEmitter far;
-        far.kind = kind;
-        far.radiant = glm::vec3(1.f);
-        far.innerAngle = 0.2f;
-        far.outerAngle = 0.4f;
-        far.world = glm::translate(glm::mat4(1.f), glm::vec3(0.f, 0.9e7f, 0.f));
+        PhotonEmitter far =
+            shining(kind, glm::translate(glm::mat4(1.f), glm::vec3(0.f, 0.9e7f, 0.f)));
         PhotonEmitter near = far;
         prepareEmitter(registry, {glm::vec3(-1.f), glm::vec3(1.f)}, near);
         EXPECT_GT(near.power.x, 0.f);
@@ -422,13 +428,8 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
     // A huge scale keeps the axis (its length is taken in double, where float's overflowed
     // and the light went dark as if it had none).
     for (const EmitterKind kind : {EmitterKind::Spot, EmitterKind::Directional}) {
-        PhotonEmitter huge;
-        huge.kind = kind;
-        huge.radiant = glm::vec3(1.f);
-        huge.innerAngle = 0.2f;
-        huge.outerAngle = 0.4f;
-        huge.world = aimedAlong({0.f, -1.f, 0.f}, {0.f, 2.f, 0.f}) *
-                     glm::scale(glm::mat4(1.f), glm::vec3(1e20f));
+        PhotonEmitter huge = shining(kind, aimedAlong({0.f, -1.f, 0.f}, {0.f, 2.f, 0.f}) *
+                                               glm::scale(glm::mat4(1.f), glm::vec3(1e20f)));
         prepareEmitter(registry, {glm::vec3(-1.f), glm::vec3(1.f)}, huge);
         EXPECT_GT(huge.power.x, 0.f);
         EXPECT_NEAR(huge.axis.y, -1.f, 1e-6f);

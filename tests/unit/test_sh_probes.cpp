@@ -631,6 +631,15 @@ TEST(ShProbes, PhotonModeCarriesPointAndSpotLightsAtTheProbe) {
     }
 }
 
+/// Every probe of `b` holds bit for bit what the same probe of `a` holds.
+void expectSameProbes(const FloorScene& a, const FloorScene& b) {
+    const ProbeVolume& va = a.world.ctx().get<ProbeVolume>();
+    const ProbeVolume& vb = b.world.ctx().get<ProbeVolume>();
+    ASSERT_EQ(va.probeCount(), vb.probeCount());
+    for (std::uint32_t p = 0; p < va.probeCount(); ++p)
+        ASSERT_EQ(std::memcmp(&va.coefficients(p), &vb.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
+}
+
 TEST(ShProbes, LightsPastThePosesReachAreLeftDarkAndCastNoRay) {
     // Photon mode, where the probes hold point and spot lights themselves (the test above). A
     // point light 2e7 m above the floor, just past kMaxPoseReach, bright enough to give
@@ -651,11 +660,7 @@ TEST(ShProbes, LightsPastThePosesReachAreLeftDarkAndCastNoRay) {
     add({0.f, 1e20f, 0.f}, false, 1.f);
     add({1e20f, 1.f, 0.f}, true, 1.f);
     scene.run();
-    const ProbeVolume& a = plain.world.ctx().get<ProbeVolume>();
-    const ProbeVolume& b = scene.world.ctx().get<ProbeVolume>();
-    ASSERT_EQ(a.probeCount(), b.probeCount());
-    for (std::uint32_t p = 0; p < a.probeCount(); ++p)
-        ASSERT_EQ(std::memcmp(&a.coefficients(p), &b.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
+    expectSameProbes(plain, scene);
 }
 
 TEST(ShProbes, LightsWithNoAxisToShineAlongAreLeftDark) {
@@ -674,11 +679,7 @@ TEST(ShProbes, LightsWithNoAxisToShineAlongAreLeftDark) {
     scene.world.emplace<WorldTransform>(sun, glm::mat4(0.f));
     scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
     scene.run();
-    const ProbeVolume& a = plain.world.ctx().get<ProbeVolume>();
-    const ProbeVolume& b = scene.world.ctx().get<ProbeVolume>();
-    ASSERT_EQ(a.probeCount(), b.probeCount());
-    for (std::uint32_t p = 0; p < a.probeCount(); ++p)
-        ASSERT_EQ(std::memcmp(&a.coefficients(p), &b.coefficients(p), sizeof(sh::ShRgb)), 0) << p;
+    expectSameProbes(plain, scene);
 }
 
 TEST(ShProbes, ConstantEnvironmentGivesPiL) {
