@@ -48,12 +48,20 @@ std::vector<const Schedule::Entry*> Schedule::entries() const {
 void Schedule::run(Registry& registry, const FrameContext& frame) {
     FrameProfiler* profiler = registry.ctx().find<FrameProfiler>();
     if (profiler) profiler->beginFrame(frame.frameIndex);
-    for (auto& entries : mEntries) {
-        for (Entry& e : entries) {
-            if (!e.enabled) continue;
-            FrameProfiler::Scope scope(profiler, e.name);
-            e.function(registry, frame);
+    try {
+        for (auto& entries : mEntries) {
+            for (Entry& e : entries) {
+                if (!e.enabled) continue;
+                FrameProfiler::Scope scope(profiler, e.name);
+                e.function(registry, frame);
+            }
         }
+    } catch (...) {
+        // The frame ends with the error, and the schedule stays usable: the next run begins a
+        // frame of its own. The changes stay marked, so the systems that did not run see them
+        // next frame.
+        if (profiler) profiler->endFrame();
+        throw;
     }
     // What a frame changed has been seen by every system of that frame.
     registry.clearChanges();

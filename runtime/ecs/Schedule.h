@@ -38,6 +38,10 @@ public:
     /// Turns an entry on or off by full name; returns false if there is no such entry.
     bool setEnabled(std::string_view fullName, bool enabled);
 
+    /// Runs every enabled entry in order, timed by the context's FrameProfiler when there is
+    /// one, then clears the registry's changes. An exception from an entry ends the frame
+    /// (its profile included) and propagates; the changes stay marked, and the next run is a
+    /// frame like any other.
     void run(Registry& registry, const FrameContext& frame);
 
     const std::vector<std::string>& phases() const { return mPhases; }

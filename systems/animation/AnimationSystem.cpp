@@ -2,6 +2,7 @@
 
 #include "components/PathFollower.h"
 #include "components/Transform.h"
+#include "runtime/core/Log.h"
 
 #include <algorithm>
 #include <cmath>
@@ -18,6 +19,7 @@ void samplePath(const PathFollower& path, double t, Transform& pose) {
         t = first + std::fmod(t - first, last - first);
         if (t < first) t += last - first;
     }
+    if (std::isnan(t)) return; // no time (or an endless one on a loop): the pose stays
     if (t <= first) {
         pose.translation = keys.front().position;
         pose.rotation = keys.front().rotation;
@@ -29,8 +31,11 @@ void samplePath(const PathFollower& path, double t, Transform& pose) {
         return;
     }
     // First key strictly after t; keys are sorted by time.
-    const auto next = std::upper_bound(keys.begin(), keys.end(), t,
-                                       [](double value, const PathKey& k) { return value < k.time; });
+    // (Clamped: keys a game wrote out of order or with NaN times must not send it past them.)
+    const auto next =
+        std::clamp(std::upper_bound(keys.begin(), keys.end(), t,
+                                    [](double value, const PathKey& k) { return value < k.time; }),
+                   keys.begin() + 1, keys.end() - 1);
     const PathKey& b = *next;
     const PathKey& a = *(next - 1);
     const float span = b.time - a.time;
@@ -40,6 +45,11 @@ void samplePath(const PathFollower& path, double t, Transform& pose) {
 }
 
 void AnimationSystem::update(Registry& registry, const FrameContext& frame) {
+    if (!std::isfinite(frame.time) && !mWarnedTime) {
+        logWarning("animation: frame time ", frame.time,
+                   " is not finite; scripted paths hold their poses until it is");
+        mWarnedTime = true;
+    }
     registry.view<const PathFollower, Transform>().each(
         [&](Entity e, const PathFollower& path, Transform& transform) {
             Transform next = transform;

@@ -9,7 +9,8 @@ struct PathFollower;
 struct Transform;
 
 /// The pose of a path at time `t` seconds: linear in position, slerp in rotation; wraps when
-/// the path loops, holds the last key otherwise. A path with no keys leaves `pose` unchanged.
+/// the path loops, holds the last key otherwise. A path with no keys, or a time that is NaN
+/// (or infinite on a looping path), leaves `pose` unchanged.
 void samplePath(const PathFollower& path, double t, Transform& pose);
 
 /** Moves scripted entities (cameras, mobiles, avatars, lights) along their paths.
@@ -20,6 +21,9 @@ void samplePath(const PathFollower& path, double t, Transform& pose);
 class AnimationSystem {
 public:
     void update(Registry& registry, const FrameContext& frame);
+
+private:
+    bool mWarnedTime = false;
 };
 
 } // namespace qgi

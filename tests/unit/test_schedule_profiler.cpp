@@ -16,6 +16,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <thread>
 
@@ -78,6 +79,33 @@ TEST(Schedule, DisabledEntriesDoNotRun) {
     Registry r;
     s.run(r, FrameContext{});
     EXPECT_EQ(runs, 0);
+}
+
+TEST(Schedule, AFrameThatThrowsEndsAndTheNextRuns) {
+    // An entry throws: the error reaches the caller, the profiled frame is ended (the next
+    // run used to abort on "beginFrame without endFrame"), and what the frame changed stays
+    // marked for the entries that did not run.
+    Registry r;
+    r.ctx().emplace<FrameProfiler>();
+    const Entity e = r.create();
+    r.emplace<Transform>(e);
+    Schedule s;
+    s.addPhase("work").addPhase("late");
+    bool fail = true;
+    std::size_t changesSeenLate = 0;
+    s.add("work", "mover", [&](Registry& reg, const FrameContext&) {
+        reg.patch<Transform>(e);
+        if (fail) throw Error("boom");
+    });
+    s.add("late", "watcher", [&](Registry& reg, const FrameContext&) {
+        changesSeenLate = reg.changed<Transform>().size();
+    });
+    EXPECT_THROW(s.run(r, FrameContext{0, 0.0, 0.f, 0}), Error);
+    EXPECT_EQ(r.changed<Transform>().size(), 1u);
+    fail = false;
+    EXPECT_NO_THROW(s.run(r, FrameContext{1, 0.0, 0.f, 0}));
+    EXPECT_EQ(changesSeenLate, 1u);
+    EXPECT_TRUE(r.changed<Transform>().empty());
 }
 
 TEST(Schedule, ChangesAreVisibleLaterInTheFrameAndClearedAfter) {
@@ -152,6 +180,35 @@ TEST(Animation, LoopingPathWrapsAndOffsetShiftsIt) {
     path.timeOffset = 0.f;
     EXPECT_FLOAT_EQ(xAt(0.f), 0.f);
     EXPECT_FLOAT_EQ(xAt(9.f), 4.f);
+}
+
+TEST(Animation, TimesThatAreNoNumberLeaveThePoseAndKeysOutOfOrderAreNotReadPast) {
+    // NaN (a game's bad clock), or infinity on a loop (fmod gives NaN): the pose stays as it
+    // was; before, the key search read past the last key.
+    PathFollower path{
+        {{1.f, glm::vec3(0.f)}, {2.f, glm::vec3(2.f, 0.f, 0.f)}, {3.f, glm::vec3(4.f, 0.f, 0.f)}},
+        true};
+    const glm::vec3 before(7.f, 8.f, 9.f);
+    for (const double t :
+         {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+        Transform pose;
+        pose.translation = before;
+        samplePath(path, t, pose);
+        EXPECT_EQ(pose.translation, before) << t;
+    }
+    // Without the loop an infinite time holds the last key.
+    path.loop = false;
+    Transform pose;
+    samplePath(path, std::numeric_limits<double>::infinity(), pose);
+    EXPECT_EQ(pose.translation, glm::vec3(4.f, 0.f, 0.f));
+    // Keys a game wrote out of order, or with a NaN time: a pose between two of its keys.
+    path.keys[1].time = 5.f;
+    path.keys[2].time = std::numeric_limits<float>::quiet_NaN();
+    for (const double t : {1.5, 2.5, 4.0, 6.0}) {
+        samplePath(path, t, pose);
+        EXPECT_GE(pose.translation.x, 0.f) << t;
+        EXPECT_LE(pose.translation.x, 4.f) << t;
+    }
 }
 
 TEST(Animation, RotationIsSlerpedAtConstantAngularSpeed) {
