@@ -52,8 +52,14 @@ void validate(const DetpSettings& settings) {
     if (!std::isfinite(settings.discRadius) || settings.discRadius < 0.f)
         fail("DetpSettings.discRadius = ", settings.discRadius,
              ": must be a finite number of metres >= 0 (0: scene default)");
-    if (settings.photonMapNeighbours == 0)
-        fail("DetpSettings.photonMapNeighbours = 0: the photon map needs at least 1 neighbour");
+    if (settings.estimator != IrradianceEstimator::Detp &&
+        settings.estimator != IrradianceEstimator::ImpactCount &&
+        settings.estimator != IrradianceEstimator::PhotonMap)
+        fail("DetpSettings.estimator = ", int(settings.estimator),
+             " is none of detp, impact or photonmap");
+    if (settings.photonMapNeighbours == 0 || settings.photonMapNeighbours > kMaxPhotonMapNeighbours)
+        fail("DetpSettings.photonMapNeighbours = ", settings.photonMapNeighbours,
+             ": the photon map takes 1 to ", kMaxPhotonMapNeighbours, " neighbours");
     if (!std::isfinite(settings.photonMapMaxRadius) || settings.photonMapMaxRadius < 0.f)
         fail("DetpSettings.photonMapMaxRadius = ", settings.photonMapMaxRadius,
              ": must be a finite number of metres >= 0 (0: default)");

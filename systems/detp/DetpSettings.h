@@ -19,6 +19,10 @@ enum class IrradianceEstimator {
 IrradianceEstimator parseIrradianceEstimator(std::string_view name);
 std::string_view irradianceEstimatorName(IrradianceEstimator estimator);
 
+/// Most neighbours a photon map query may gather: each query keeps that many candidates per
+/// thread (Jensen's estimates use tens to hundreds; a billion asked for gigabytes).
+inline constexpr std::uint32_t kMaxPhotonMapNeighbours = 65536;
+
 struct DetpSettings {
     IrradianceEstimator estimator = IrradianceEstimator::Detp;
     /// Hybrid mode: the renderer draws the direct light of punctual lights (point, spot,
@@ -33,7 +37,7 @@ struct DetpSettings {
     /// frame schedule fills it in). 0: the mesh-based rule alone.
     std::uint32_t photonCount = 0;
     /// Photon map: k, the number of nearest hit points per estimate.
-    std::uint32_t photonMapNeighbours = 50;
+    std::uint32_t photonMapNeighbours = 50; ///< 1 to kMaxPhotonMapNeighbours
     /// Photon map: the search stops growing at this radius, metres; where fewer than k hit points
     /// lie inside it, the estimate divides what it found by the area of this disc.
     /// 0: kPhotonMapRadiusPerDisc disc radii.

@@ -1534,6 +1534,11 @@ TEST(Detp, RejectsBadSettings) {
     s = {};
     s.photonMapNeighbours = 0;
     EXPECT_THAT(message(s), HasSubstr("DetpSettings.photonMapNeighbours"));
+    s.photonMapNeighbours = 4'000'000'000u; // asked for gigabytes and failed with bad_alloc
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.photonMapNeighbours"));
+    s = {};
+    s.estimator = IrradianceEstimator(77); // ran as nothing: every vertex at 0
+    EXPECT_THAT(message(s), HasSubstr("DetpSettings.estimator"));
     s = {};
     s.photonMapMaxRadius = kInf;
     EXPECT_THAT(message(s), HasSubstr("DetpSettings.photonMapMaxRadius"));
