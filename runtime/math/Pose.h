@@ -36,6 +36,20 @@ inline bool isUsableLightPosition(const glm::vec3& p) {
     return true;
 }
 
+/// W/sr (W/m^2 for a sun, W/(m^2 sr) for an emissive surface): the brightest a light may be.
+/// Past it float lighting overflows (a point light's radiance over the square of a distance of
+/// a micrometre, summed over a probe's rays), so every system leaves such a light dark: the
+/// importer takes at most 1e9 from a file, a game's code may set more.
+inline constexpr float kMaxLightRadiance = 1e20f;
+
+/// A light's colour times intensity every system can light with: finite, not negative, and
+/// at most kMaxLightRadiance.
+inline bool isUsableLightRadiance(const glm::vec3& radiance) {
+    for (int c = 0; c < 3; ++c)
+        if (!(radiance[c] >= 0.f && radiance[c] <= kMaxLightRadiance)) return false;
+    return true;
+}
+
 /// Where a spot or directional light shines: its local -Z axis in world space (glTF's
 /// convention), unit length, or zero where the pose collapses that axis (a scale of 0 along
 /// it) or it is not finite. Every system leaves a light with no axis dark. The length is

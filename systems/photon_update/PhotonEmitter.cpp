@@ -166,6 +166,10 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
         return disable(emitter,
                        emitter.kind == EmitterKind::Surface ? "emission" : "colour x intensity",
                        "is negative or not finite");
+    if (!isUsableLightRadiance(emitter.radiant))
+        return disable(emitter,
+                       emitter.kind == EmitterKind::Surface ? "emission" : "colour x intensity",
+                       "is above 1e20, past what float lighting can carry");
     emitter.position = glm::vec3(emitter.world[3]);
     if ((emitter.kind == EmitterKind::Point || emitter.kind == EmitterKind::Spot) &&
         !isUsableLightPosition(emitter.position))

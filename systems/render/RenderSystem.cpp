@@ -287,6 +287,7 @@ void RenderSystem::collectLights(const Registry& registry) {
     registry.view<const PointLight, const WorldTransform>().each(
         [&](const PointLight& light, const WorldTransform& world) {
             if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
+            if (!isUsableLightRadiance(light.color * light.intensity)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Point;
             out.position = glm::vec3(world.matrix[3]);
@@ -297,6 +298,7 @@ void RenderSystem::collectLights(const Registry& registry) {
             if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
             const glm::vec3 axis = lightForward(world.matrix);
             if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
+            if (!isUsableLightRadiance(light.color * light.intensity)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Spot;
             out.position = glm::vec3(world.matrix[3]);
@@ -309,6 +311,7 @@ void RenderSystem::collectLights(const Registry& registry) {
         [&](const DirectionalLight& light, const WorldTransform& world) {
             const glm::vec3 axis = lightForward(world.matrix);
             if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
+            if (!isUsableLightRadiance(light.color * light.irradiance)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Directional;
             out.direction = axis;

@@ -202,10 +202,11 @@ void ShProbeSystem::snapshotLights(const Registry& registry) {
             out.radiance = light.color * light.irradiance;
             out.standIn = registry.has<LightStandIn>(e);
         });
-    // Lights with non-finite data would poison every probe, and one past kMaxPoseReach or
-    // with no axis to shine along is dark everywhere (the photons' rules): leave them out.
+    // Lights with non-finite data, or brighter than float lighting can carry, would poison
+    // every probe, and one past kMaxPoseReach or with no axis to shine along is dark
+    // everywhere (the photons' rules): leave them out.
     std::erase_if(mLights, [](const Light& l) {
-        return !isUsableLightPosition(l.position) || !isFinite(l.radiance) ||
+        return !isUsableLightPosition(l.position) || !isUsableLightRadiance(l.radiance) ||
                (l.kind != Light::Kind::Point && l.direction == glm::vec3(0.f)) ||
                !isFinite(l.direction) || !std::isfinite(l.coneScale) ||
                !std::isfinite(l.coneOffset);

@@ -365,10 +365,11 @@ TEST_F(RenderTest, AMirroredCameraSeesWhatItsUnmirroredPoseSees) {
     }
 }
 
-TEST_F(RenderTest, LightsWithNoAxisToShineAlongAreLeftDark) {
+TEST_F(RenderTest, LightsWithNoAxisOrPastTheBrightestAreLeftDark) {
     // A sun and a spot on nodes scaled to 0 along -Z have no direction: dark, as the photons
-    // leave them (the sun's normalised zero axis had put NaN on every lit pixel). The image is
-    // the reference's for the point light alone, which knows nothing of the two.
+    // leave them (the sun's normalised zero axis had put NaN on every lit pixel); so is a
+    // point light past kMaxLightRadiance. The image is the reference's for the first point
+    // light alone, which knows nothing of the three.
     SceneBuilder scene(mWorld);
     buildCornellBox(scene);
     scene.addPointLight({0.25f, 1.65f, 0.35f}, {1.f, 0.9f, 0.75f}, 2.5f);
@@ -380,6 +381,10 @@ TEST_F(RenderTest, LightsWithNoAxisToShineAlongAreLeftDark) {
     const Entity spot = mWorld.create();
     mWorld.emplace<SpotLight>(spot, SpotLight{glm::vec3(1.f), 5.f, 0.2f, 0.6f});
     mWorld.emplace<WorldTransform>(spot, WorldTransform{flat});
+    const Entity bright = mWorld.create();
+    mWorld.emplace<PointLight>(bright, PointLight{glm::vec3(1.f), 3e38f});
+    mWorld.emplace<WorldTransform>(
+        bright, WorldTransform{glm::translate(glm::mat4(1.f), glm::vec3(0.f, 1.f, 0.f))});
     expectHybridFrameMatchesReference("no_axis_lights", scene);
 }
 

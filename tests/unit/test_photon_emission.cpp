@@ -390,6 +390,8 @@ TEST(PhotonEmission, InvalidLightsEmitNothingAndDoNotStopTheFrame) {
     expectDark(bad);
     bad.radiant = glm::vec3(NAN);
     expectDark(bad);
+    bad.radiant = glm::vec3(1e21f); // finite, past kMaxLightRadiance
+    expectDark(bad);
     bad.kind = EmitterKind::Spot;
     bad.radiant = glm::vec3(1.f);
     bad.innerAngle = 0.5f;

@@ -663,10 +663,12 @@ TEST(ShProbes, LightsPastThePosesReachAreLeftDarkAndCastNoRay) {
     expectSameProbes(plain, scene);
 }
 
-TEST(ShProbes, LightsWithNoAxisToShineAlongAreLeftDark) {
+TEST(ShProbes, LightsWithNoAxisOrPastTheBrightestAreLeftDark) {
     // A spot and a sun on nodes scaled to 0 along their -Z axis: no direction, so dark (as
-    // the photons and the renderer leave them), not shining down a default axis. Photon mode,
-    // where the probes hold the lights themselves: bit for bit the floor alone.
+    // the photons and the renderer leave them), not shining down a default axis. A point
+    // light of 3e38 W/sr, finite but past kMaxLightRadiance: its light over a squared
+    // distance overflowed and made every probe NaN. Photon mode, where the probes hold the
+    // lights themselves: bit for bit the floor alone.
     FloorScene plain(floorSettings(false), grey(0.5f));
     plain.run();
     FloorScene scene(floorSettings(false), grey(0.5f));
@@ -678,6 +680,10 @@ TEST(ShProbes, LightsWithNoAxisToShineAlongAreLeftDark) {
     const Entity sun = scene.world.create();
     scene.world.emplace<WorldTransform>(sun, glm::mat4(0.f));
     scene.world.emplace<DirectionalLight>(sun, DirectionalLight{glm::vec3(1.f), 50.f});
+    const Entity bright = scene.world.create();
+    scene.world.emplace<WorldTransform>(bright,
+                                        glm::translate(glm::mat4(1.f), glm::vec3(0.f, 0.5f, 0.f)));
+    scene.world.emplace<PointLight>(bright, PointLight{glm::vec3(1.f), 3e38f});
     scene.run();
     expectSameProbes(plain, scene);
 }
