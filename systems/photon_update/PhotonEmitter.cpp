@@ -161,6 +161,9 @@ void findEmitterSources(const Registry& registry, const PhotonSettings& settings
 
 void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitter& emitter) {
     emitter.power = glm::vec3(0.f);
+    // Set before any check can disable the light: a punctual light is the shader's either way,
+    // and a dark one that changed this flag would force a full shot (and warn again).
+    emitter.directDrawn = emitter.kind != EmitterKind::Surface; // prepareSurface decides
     if (!isFinite(emitter.world)) return disable(emitter, "WorldTransform.matrix", "is not finite");
     if (!isNonNegative(emitter.radiant))
         return disable(emitter,
@@ -174,7 +177,6 @@ void prepareEmitter(const Registry& registry, const Aabb& sceneBox, PhotonEmitte
     if ((emitter.kind == EmitterKind::Point || emitter.kind == EmitterKind::Spot) &&
         !isUsableLightPosition(emitter.position))
         return disable(emitter, "WorldTransform.matrix", "places it more than 1e7 m away");
-    emitter.directDrawn = emitter.kind != EmitterKind::Surface; // prepareSurface decides
     switch (emitter.kind) {
     case EmitterKind::Point:
         emitter.power = 4.f * glm::pi<float>() * emitter.radiant;

@@ -10,6 +10,7 @@
 #include <glm/vec3.hpp>
 
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 namespace qgi {
@@ -80,10 +81,16 @@ struct PhotonEmitter {
     std::uint32_t firstPhoton = 0; ///< this light's photons are [first, first + count)
     std::uint32_t photonCount = 0;
 
+    /// Bit for bit, so that a light left as it was is the same even where it holds a NaN
+    /// (which compares unequal to itself: such a light was prepared, and warned about, anew
+    /// every frame).
     bool sameSource(const PhotonEmitter& other) const {
-        return kind == other.kind && entity == other.entity && world == other.world &&
-               radiant == other.radiant && innerAngle == other.innerAngle &&
-               outerAngle == other.outerAngle;
+        const auto same = [](const auto& a, const auto& b) {
+            return std::memcmp(&a, &b, sizeof a) == 0;
+        };
+        return kind == other.kind && entity == other.entity && same(world, other.world) &&
+               same(radiant, other.radiant) && same(innerAngle, other.innerAngle) &&
+               same(outerAngle, other.outerAngle);
     }
 };
 

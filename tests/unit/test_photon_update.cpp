@@ -725,6 +725,30 @@ TEST(PhotonUpdate, ALightMovedPastThePosesReachGoesDarkWithAWarningAndNothingAbo
     EXPECT_NEAR(impactPower(storeOf(registry)).x, lit.x, 1e-4 * lit.x);
 }
 
+TEST(PhotonUpdate, ALightLeftWithANanColourIsWarnedAboutOnce) {
+    // NaN compares unequal to itself: the light was taken for edited, prepared and warned
+    // about again every frame. Left as it is, it is the same light: one warning.
+    Registry registry;
+    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    buildRayScene(registry);
+    PhotonUpdateSystem system(settingsWith(5'000));
+    firstUpdate(registry, system);
+    const ScopedLogLevel verbose(LogLevel::Info);
+    ::testing::internal::CaptureStderr();
+    std::uint64_t frame = 1;
+    registry.patch<PointLight>(room.light).color = glm::vec3(std::nanf(""));
+    for (int f = 0; f < 10; ++f) {
+        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
+        registry.clearChanges();
+    }
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    const std::string warning = "is negative or not finite";
+    const std::size_t first = log.find(warning);
+    ASSERT_NE(first, std::string::npos) << log;
+    EXPECT_EQ(log.find(warning, first + 1), std::string::npos) << log;
+    EXPECT_EQ(impactPower(storeOf(registry)), glm::dvec3(0.0));
+}
+
 /// Parameter: DETP in hybrid mode (the lights' first segments left to the shader: a ghost must
 /// keep its light's flag) or photon mode.
 class HundredMoves : public ::testing::TestWithParam<bool> {};
