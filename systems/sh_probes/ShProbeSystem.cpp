@@ -708,6 +708,15 @@ void ShProbeSystem::lightAvatars(Registry& registry) {
     const glm::vec3 low = grid.origin - grid.spacing;
     const glm::vec3 high = grid.origin + grid.spacing * glm::vec3(grid.counts);
     const auto light = [&](Entity e, const glm::vec3& p, ShLighting& lighting) {
+        if (!isFinite(p)) {
+            ++mStats.unlit; // left as it was
+            if (mWarnedNoPosition.insert(e).second)
+                logWarning("SH probes: avatar ", entityName(registry, e), " is at (", p.x, ", ",
+                           p.y, ", ", p.z,
+                           "), no position; it keeps its last lighting (none, "
+                           "if it has not been lit yet)");
+            return;
+        }
         if (glm::any(glm::lessThan(p, low)) || glm::any(glm::greaterThan(p, high))) {
             ++mStats.outside;
             if (mWarnedOutside.insert(e).second) {

@@ -220,6 +220,7 @@ private:
     std::vector<Entity> mAvatarEntities;
     std::unordered_set<Entity> mWarnedOutside; ///< avatars named for leaving the probe volume
     std::unordered_set<Entity> mWarnedHidden;  ///< avatars named for standing among hidden probes
+    std::unordered_set<Entity> mWarnedNoPosition; ///< avatars named for a position not finite
     bool mWarnedNonFinite = false;      ///< non-finite vertex irradiance reported once
 };
 

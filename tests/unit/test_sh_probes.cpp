@@ -1011,6 +1011,27 @@ TEST(ShProbes, AnAvatarOutsideTheVolumeIsNamedOnce) {
     EXPECT_TRUE(rooms.world.has<ShLighting>(inside) && rooms.world.has<ShLighting>(edge));
 }
 
+TEST(ShProbes, AnAvatarWithNoPositionIsNamedOnceAndKeepsItsLight) {
+    // Game code put it at NaN: it keeps what it had, and says so once (it was silent).
+    TwoRooms rooms;
+    const ProbeGrid& grid = rooms.world.ctx().get<ProbeVolume>().grid();
+    const glm::vec3 last = grid.origin + grid.spacing * glm::vec3(grid.counts - 1);
+    const Entity lost = addAvatar(rooms.world, 0.5f * (grid.origin + last));
+    rooms.world.emplace<Name>(lost, "lost");
+    rooms.system.update(rooms.world, FrameContext{1});
+    const sh::ShRgb before = rooms.world.get<ShLighting>(lost).coefficients;
+    ASSERT_GT(shNorm(before), 0.0);
+    rooms.world.patch<WorldTransform>(lost).matrix = translation(glm::vec3(std::nanf("")));
+    ::testing::internal::CaptureStderr();
+    rooms.system.update(rooms.world, FrameContext{2});
+    rooms.system.update(rooms.world, FrameContext{3});
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    const std::string named = "avatar 'lost' is at (";
+    EXPECT_NE(log.find(named), std::string::npos) << log;
+    EXPECT_EQ(log.find(named), log.rfind(named)) << log;
+    EXPECT_TRUE(sameSh(rooms.world.get<ShLighting>(lost).coefficients, before));
+}
+
 TEST(ShProbes, InterpolationReproducesLinearFieldsAndRenormalisesOverEnabledProbes) {
     // Trilinear interpolation reproduces a linear field exactly: with each of the 27 numbers
     // of probe p set to a + b . position(p), the blend at x is a + b . x (rounding aside).
