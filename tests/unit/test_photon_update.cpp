@@ -695,58 +695,59 @@ void expectEachLightsPowerShot(const PhotonStore& store) {
                 << "light " << l << ", channel " << c;
 }
 
+/// The test room shot with 5,000 photons, updated frame by frame.
+struct ShotRoom {
+    Registry registry;
+    test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
+    PhotonUpdateSystem system{settingsWith(5'000)};
+    std::uint64_t frame = 1;
+
+    ShotRoom() {
+        buildRayScene(registry);
+        firstUpdate(registry, system);
+    }
+    /// Runs `frames` updates, clearing the changes after each.
+    void run(int frames) {
+        for (int f = 0; f < frames; ++f) {
+            system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
+            registry.clearChanges();
+        }
+    }
+};
+
 TEST(PhotonUpdate, ALightMovedPastThePosesReachGoesDarkWithAWarningAndNothingAborts) {
     // The room's light carried to 1e20 m in play (a runaway animation, say): a photon shot
     // from there would make Embree abort. It is named, its photons are shot dark within the
     // budget, and brought back it shines again.
-    Registry registry;
-    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
-    buildRayScene(registry);
-    PhotonUpdateSystem system(settingsWith(5'000));
-    firstUpdate(registry, system);
-    const glm::dvec3 lit = impactPower(storeOf(registry));
+    ShotRoom w;
+    const glm::dvec3 lit = impactPower(storeOf(w.registry));
     ASSERT_GT(lit.x, 0.0);
     const ScopedLogLevel verbose(LogLevel::Info);
     ::testing::internal::CaptureStderr();
-    std::uint64_t frame = 1;
-    registry.patch<WorldTransform>(room.light).matrix = translation({0.f, 1e20f, 0.f});
-    for (int f = 0; f < 20; ++f) {
-        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
-        registry.clearChanges();
-    }
+    w.registry.patch<WorldTransform>(w.room.light).matrix = translation({0.f, 1e20f, 0.f});
+    w.run(20);
     const std::string log = ::testing::internal::GetCapturedStderr();
     EXPECT_NE(log.find("places it more than 1e7 m away"), std::string::npos) << log;
-    EXPECT_EQ(impactPower(storeOf(registry)), glm::dvec3(0.0));
-    registry.patch<WorldTransform>(room.light).matrix = translation({0.f, 1.2f, 0.f});
-    for (int f = 0; f < 20; ++f) {
-        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
-        registry.clearChanges();
-    }
-    EXPECT_NEAR(impactPower(storeOf(registry)).x, lit.x, 1e-4 * lit.x);
+    EXPECT_EQ(impactPower(storeOf(w.registry)), glm::dvec3(0.0));
+    w.registry.patch<WorldTransform>(w.room.light).matrix = translation({0.f, 1.2f, 0.f});
+    w.run(20);
+    EXPECT_NEAR(impactPower(storeOf(w.registry)).x, lit.x, 1e-4 * lit.x);
 }
 
 TEST(PhotonUpdate, ALightLeftWithANanColourIsWarnedAboutOnce) {
     // NaN compares unequal to itself: the light was taken for edited, prepared and warned
     // about again every frame. Left as it is, it is the same light: one warning.
-    Registry registry;
-    const test::Room room = buildRoom(registry, kCubeRest, kCrateRest);
-    buildRayScene(registry);
-    PhotonUpdateSystem system(settingsWith(5'000));
-    firstUpdate(registry, system);
+    ShotRoom w;
     const ScopedLogLevel verbose(LogLevel::Info);
     ::testing::internal::CaptureStderr();
-    std::uint64_t frame = 1;
-    registry.patch<PointLight>(room.light).color = glm::vec3(std::nanf(""));
-    for (int f = 0; f < 10; ++f) {
-        system.update(registry, FrameContext{frame++, 0.0, 0.f, 0});
-        registry.clearChanges();
-    }
+    w.registry.patch<PointLight>(w.room.light).color = glm::vec3(std::nanf(""));
+    w.run(10);
     const std::string log = ::testing::internal::GetCapturedStderr();
     const std::string warning = "is negative or not finite";
     const std::size_t first = log.find(warning);
     ASSERT_NE(first, std::string::npos) << log;
     EXPECT_EQ(log.find(warning, first + 1), std::string::npos) << log;
-    EXPECT_EQ(impactPower(storeOf(registry)), glm::dvec3(0.0));
+    EXPECT_EQ(impactPower(storeOf(w.registry)), glm::dvec3(0.0));
 }
 
 /// Parameter: DETP in hybrid mode (the lights' first segments left to the shader: a ghost must
