@@ -286,8 +286,6 @@ void RenderSystem::collectLights(const Registry& registry) {
     mLights.clear();
     registry.view<const PointLight, const WorldTransform>().each(
         [&](const PointLight& light, const WorldTransform& world) {
-            if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
-            if (!isUsableLightRadiance(light.color * light.intensity)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Point;
             out.position = glm::vec3(world.matrix[3]);
@@ -295,28 +293,28 @@ void RenderSystem::collectLights(const Registry& registry) {
         });
     registry.view<const SpotLight, const WorldTransform>().each(
         [&](const SpotLight& light, const WorldTransform& world) {
-            if (!isUsableLightPosition(world.matrix[3])) return; // dark: see Pose.h
-            const glm::vec3 axis = lightForward(world.matrix);
-            if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
-            if (!isUsableLightRadiance(light.color * light.intensity)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Spot;
             out.position = glm::vec3(world.matrix[3]);
-            out.direction = axis;
+            out.direction = lightForward(world.matrix);
             out.radiance = light.color * light.intensity;
             out.innerConeAngle = light.innerConeAngle;
             out.outerConeAngle = light.outerConeAngle;
         });
     registry.view<const DirectionalLight, const WorldTransform>().each(
         [&](const DirectionalLight& light, const WorldTransform& world) {
-            const glm::vec3 axis = lightForward(world.matrix);
-            if (axis == glm::vec3(0.f)) return; // dark: no axis to shine along
-            if (!isUsableLightRadiance(light.color * light.irradiance)) return; // dark: Pose.h
             RenderLight& out = mLights.emplace_back();
             out.type = LightType::Directional;
-            out.direction = axis;
+            out.direction = lightForward(world.matrix);
             out.radiance = light.color * light.irradiance;
         });
+    // Dark, as in every lighting system (runtime/math/Pose.h): too bright for float lighting,
+    // a point or spot placed past kMaxPoseReach, a spot or sun with no axis to shine along.
+    std::erase_if(mLights, [](const RenderLight& l) {
+        return !isUsableLightRadiance(l.radiance) ||
+               (l.type != LightType::Directional && !isUsableLightPosition(l.position)) ||
+               (l.type != LightType::Point && l.direction == glm::vec3(0.f));
+    });
 }
 
 bool RenderSystem::findCamera(const Registry& registry, RenderCamera& camera) {
